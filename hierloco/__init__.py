@@ -1,0 +1,13 @@
+"""hierloco: hierarchical legged locomotion with learned latent action spaces, on TorchRL and MuJoCo.
+
+Implements Li et al., "Planning in Learned Latent Action Spaces for Generalizable Legged Locomotion", RA-L 2021
+(https://arxiv.org/abs/2008.11867).
+"""
+
+import os
+
+# Headless rendering through EGL (Mesa) unless the user chose otherwise; must precede dm_control's import.
+os.environ.setdefault("MUJOCO_GL", "egl")
+os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"] if os.environ["MUJOCO_GL"] != "glfw" else "")
+
+__version__ = "0.1.0"

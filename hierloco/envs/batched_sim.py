@@ -1,0 +1,206 @@
+"""The batched simulator: B copies of a robot stepped in lockstep through open-loop joint-target sequences.
+
+This is hierloco's hot loop. A whole sequence of T control steps (a latent action is T = N = 100 steps at 100 Hz)
+for all B copies runs natively in one threaded ``mujoco.rollout`` call, with no Python per step. Each copy keeps its
+own state; copies can be reset one by one; disabled legs are locked at their standing angles.
+
+Example:
+    >>> import numpy as np
+    >>> from hierloco.envs.batched_sim import BatchedSimulator
+    >>> sim = BatchedSimulator("a1", num_robots=4, seed=0)
+    >>> targets = np.tile(np.asarray(sim.robot.standing_pose), (4, 100, 1))  # B x T x J joint targets, rad
+    >>> out = sim.run(targets)
+    >>> out.com_state.shape, bool(out.fallen.any())
+    ((4, 100, 5), False)
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from typing import Sequence
+
+import mujoco
+import numpy as np
+from mujoco import rollout as mj_rollout
+
+from hierloco.envs.frames import com_state_from_base, quat_to_roll_pitch_yaw, world_to_local, yaw_rate_from_base
+from hierloco.envs.locomotion import FOOT_CONTACT_FORCE
+from hierloco.envs.robots import (
+    PHYSICS_STEPS_PER_CONTROL,
+    RobotSpec,
+    compile_model,
+    get_robot,
+    joint_qpos_indices,
+    joint_qvel_indices,
+    standing_qpos,
+)
+
+STATE_SPEC = mujoco.mjtState.mjSTATE_FULLPHYSICS
+
+
+@dataclass
+class SimulationResult:
+    """What happened to each copy at the end of each control step (``B x T`` leading dimensions).
+
+    Attributes:
+        com_state: ``B x T x 5`` ``(x, y, yaw, vx, vy)`` of the base in the world frame (m, rad, m/s).
+        com_velocity_local: ``B x T x 2`` base velocity in the local yaw frame (forward, left), m/s.
+        yaw_rate: ``B x T`` in rad/s.
+        height: ``B x T`` base height, m.
+        roll_pitch: ``B x T x 2`` in rad.
+        joint_positions: ``B x T x J`` in rad, ``robot.joint_names`` order.
+        foot_contacts: ``B x T x L`` bool, leg order.
+        fallen: ``B x T`` bool, true from the first step the robot fell (roll, pitch or height out of limits).
+        unstable: ``B x T`` bool, true from the first step the physics blew up (NaN or MuJoCo auto-reset).
+    """
+
+    com_state: np.ndarray
+    com_velocity_local: np.ndarray
+    yaw_rate: np.ndarray
+    height: np.ndarray
+    roll_pitch: np.ndarray
+    joint_positions: np.ndarray
+    foot_contacts: np.ndarray
+    fallen: np.ndarray
+    unstable: np.ndarray
+
+    @property
+    def failed(self) -> np.ndarray:
+        """``B x T`` bool: fallen or unstable."""
+        return self.fallen | self.unstable
+
+
+class BatchedSimulator:
+    """B copies of ``robot`` driven by open-loop joint targets at 100 Hz, simulated natively with threads.
+
+    Args:
+        robot: a registered robot name or a :class:`RobotSpec`.
+        num_robots: B, the number of copies.
+        disabled_legs: legs locked at their standing angles (their targets are ignored).
+        init_joint_noise: uniform noise in rad on the standing joint angles at reset.
+        seed: seeds the reset noise.
+        nthread: simulation threads (default: all cores).
+    """
+
+    def __init__(self, robot: str | RobotSpec, num_robots: int, *, disabled_legs: Sequence[str] = (),
+                 init_joint_noise: float = 0.0, seed: int | None = None, nthread: int | None = None):
+        if int(num_robots) < 1:
+            raise ValueError(f"num_robots must be at least 1, got {num_robots}")
+        self.robot = get_robot(robot)
+        self.num_robots = int(num_robots)
+        self.disabled_legs = tuple(disabled_legs)
+        self.init_joint_noise = float(init_joint_noise)
+        self.model = compile_model(self.robot, self.disabled_legs)
+        self.nthread = int(nthread) if nthread is not None else (os.cpu_count() or 1)
+        self._datas = [mujoco.MjData(self.model) for _ in range(max(1, self.nthread))]
+        self._pool = mj_rollout.Rollout(nthread=self.nthread if self.nthread > 1 else 0)
+        self._rng = np.random.default_rng(seed)
+
+        nq, nv = self.model.nq, self.model.nv
+        self.nstate = mujoco.mj_stateSize(self.model, STATE_SPEC)
+        self._qpos = slice(1, 1 + nq)
+        self._qvel = slice(1 + nq, 1 + nq + nv)
+        self._joint_qpos = joint_qpos_indices(self.model, self.robot)
+        self._joint_qvel = joint_qvel_indices(self.model, self.robot)
+        self._locked = self.robot.leg_joint_indices(self.disabled_legs)
+        self._standing = np.asarray(self.robot.standing_pose, dtype=np.float64)
+        self.timestep = self.model.opt.timestep
+
+        data = self._datas[0]
+        data.qpos[:] = standing_qpos(self.model, self.robot)
+        self._standing_state = np.empty(self.nstate)
+        mujoco.mj_getState(self.model, data, self._standing_state, STATE_SPEC)
+        self.state = np.tile(self._standing_state, (self.num_robots, 1))
+        self.reset()
+
+    # ------------------------------------------------------------------ state
+    def reset(self, mask: np.ndarray | None = None) -> np.ndarray:
+        """Puts the copies in ``mask`` (``B`` bool, default all) back standing at the origin facing +y.
+
+        Returns the ``B x 5`` CoM state of every copy.
+        """
+        index = np.arange(self.num_robots) if mask is None else np.flatnonzero(np.asarray(mask, dtype=bool))
+        self.state[index] = self._standing_state
+        if self.init_joint_noise > 0 and len(index):
+            noise = self._rng.uniform(-self.init_joint_noise, self.init_joint_noise, (len(index), len(self._joint_qpos)))
+            self.state[np.ix_(index, 1 + self._joint_qpos)] += noise
+        return self.com_state
+
+    def set_state(self, state: np.ndarray, mask: np.ndarray | None = None) -> None:
+        """Sets full physics states (``B x nstate``, or ``M x nstate`` for the ``M`` copies in ``mask``)."""
+        index = slice(None) if mask is None else np.flatnonzero(np.asarray(mask, dtype=bool))
+        self.state[index] = state
+
+    @property
+    def com_state(self) -> np.ndarray:
+        """``B x 5`` current ``(x, y, yaw, vx, vy)`` of each copy in the world frame."""
+        qpos, qvel = self.state[:, self._qpos], self.state[:, self._qvel]
+        return com_state_from_base(qpos[:, 0:3], qpos[:, 3:7], qvel[:, 0:3])
+
+    @property
+    def joint_positions(self) -> np.ndarray:
+        """``B x J`` current joint angles in rad."""
+        return self.state[:, self._qpos][:, self._joint_qpos]
+
+    # ------------------------------------------------------------------ simulation
+    def run(self, joint_targets: np.ndarray) -> SimulationResult:
+        """Runs ``B x T x J`` joint targets (rad, one per control step) on every copy, from its current state.
+
+        Each target is held for the 5 physics steps of its control step. The copies' states advance to the end of
+        the sequence (fallen or unstable copies too: reset them with :meth:`reset`).
+        """
+        targets = np.asarray(joint_targets, dtype=np.float64)
+        if targets.ndim != 3 or targets.shape[0] != self.num_robots or targets.shape[2] != self.robot.num_joints:
+            raise ValueError(f"joint_targets must be B x T x J = {self.num_robots} x T x {self.robot.num_joints}, "
+                             f"got shape {targets.shape}")
+        if not np.all(np.isfinite(targets)):
+            raise ValueError("joint_targets contain NaN or inf")
+        if len(self._locked):
+            targets = targets.copy()
+            targets[..., self._locked] = self._standing[self._locked]
+        num_steps = targets.shape[1]
+        control = np.repeat(targets, PHYSICS_STEPS_PER_CONTROL, axis=1)
+        states, sensors = self._pool.rollout(self.model, self._datas, self.state, control)
+        t0 = self.state[:, 0]
+        self.state = states[:, -1].copy()
+        return self._summarise(states, sensors, t0, num_steps)
+
+    def _summarise(self, states, sensors, t0, num_steps) -> SimulationResult:
+        k = PHYSICS_STEPS_PER_CONTROL
+        # a blow-up shows as non-finite numbers or as MuJoCo's auto-reset sending the clock back
+        expected_time = t0[:, None] + self.timestep * np.arange(1, states.shape[1] + 1)
+        broken = ~np.isfinite(states).all(-1) | (np.abs(states[..., 0] - expected_time) > 0.5 * self.timestep)
+        unstable = np.logical_or.accumulate(broken.reshape(self.num_robots, num_steps, k).any(-1), axis=1)
+
+        ends = states[:, k - 1::k]  # B x T x nstate at the end of each control step
+        qpos, qvel = ends[..., self._qpos], ends[..., self._qvel]
+        quat = qpos[..., 3:7]
+        rpy = quat_to_roll_pitch_yaw(quat)
+        robot = self.robot
+        down = (np.abs(rpy[..., 0]) > robot.max_roll) | (np.abs(rpy[..., 1]) > robot.max_pitch)
+        down |= qpos[..., 2] < robot.min_height
+        fallen = np.logical_or.accumulate(down, axis=1)
+        com_state = com_state_from_base(qpos[..., 0:3], quat, qvel[..., 0:3])
+        return SimulationResult(
+            com_state=com_state,
+            com_velocity_local=world_to_local(qvel[..., 0:2], rpy[..., 2]),
+            yaw_rate=yaw_rate_from_base(quat, qvel[..., 3:6]),
+            height=qpos[..., 2],
+            roll_pitch=rpy[..., :2],
+            joint_positions=qpos[..., self._joint_qpos],
+            foot_contacts=sensors[:, k - 1::k, : len(robot.legs)] > FOOT_CONTACT_FORCE,
+            fallen=fallen,
+            unstable=unstable,
+        )
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.close()
+            self._pool = None
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:  # interpreter shutdown
+            pass

@@ -1,0 +1,47 @@
+"""``make_env``: the TorchRL locomotion environment of a robot (SPEC 4).
+
+Example:
+    >>> from hierloco.envs import make_env
+    >>> from torchrl.envs.utils import check_env_specs
+    >>> env = make_env("daisy", seed=0)
+    >>> check_env_specs(env)
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+from torchrl.envs import Compose, DoubleToFloat, TransformedEnv
+from torchrl.envs.libs.dm_control import DMControlWrapper
+
+from hierloco.envs.locomotion import INIT_JOINT_NOISE, make_dm_env
+from hierloco.envs.robots import RobotSpec, get_robot
+from hierloco.envs.transforms import CoMState, DisableLegs
+
+
+def make_env(
+    robot: str | RobotSpec,
+    *,
+    disabled_legs: Sequence[str] = (),
+    time_limit: float = 10.0,
+    seed: int | None = None,
+    init_joint_noise: float = INIT_JOINT_NOISE,
+    device: str = "cpu",
+) -> TransformedEnv:
+    """A TorchRL env of ``robot`` (a registered name or a :class:`RobotSpec`) at 100 Hz.
+
+    The action is the joint-target vector (rad, ``robot.joint_names`` order); observations are float32 and
+    include ``com_state`` (``x, y, yaw, vx, vy``, world frame) and ``com_velocity_local``. ``disabled_legs`` adds a
+    :class:`DisableLegs` transform. A fall sets ``terminated``, the time limit (s) ``truncated``.
+    """
+    robot = get_robot(robot)
+    robot.leg_joint_indices(disabled_legs)  # names checked before any work
+    base = DMControlWrapper(make_dm_env(robot, time_limit=time_limit, init_joint_noise=init_joint_noise),
+                            device=device)
+    transforms = [DoubleToFloat(), CoMState()]
+    if disabled_legs:
+        transforms.append(DisableLegs(robot, disabled_legs))
+    env = TransformedEnv(base, Compose(*transforms))
+    if seed is not None:
+        env.set_seed(seed)
+    return env
