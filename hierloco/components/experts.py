@@ -1,0 +1,176 @@
+"""The expert controller: a Raibert-style footstep law with leg inverse kinematics (SPEC 5.1).
+
+A desired CoM velocity ``(vx, vy, yaw_rate)`` in the robot's local (yaw) frame becomes footsteps and then joint
+targets, closed loop on the measured CoM velocity, batched over B robots that share one gait clock:
+
+- gait: the robot's gait groups take turns in swing (trot pairs for A1, tripods for Daisy); with K groups each
+  swings for ``gait_period / K`` and stands for the rest (``stance_duration``);
+- stance: a stance foot moves in the body's yaw frame opposite to the commanded motion,
+  ``p <- R(-yaw_rate dt) p - v_des dt``;
+- swing: the foot travels from lift-off to the touchdown point chosen by the feedback law
+  ``p_td = R(yaw_rate T_st / 2 + k_yaw (yaw_rate_meas - yaw_rate)) p_nominal + T_st / 2 v_des + k (v - v_des)``
+  with height ``h sin(pi * phase)``;
+- the feet are placed in the base frame (so stance legs push the body back to level) and turned into joint
+  targets by :class:`LegKinematics`.
+
+Example:
+    >>> import numpy as np
+    >>> from hierloco.envs.batched_sim import BatchedSimulator
+    >>> sim = BatchedSimulator("daisy", num_robots=2)
+    >>> ctrl = RaibertController("daisy", num_robots=2)
+    >>> commands = np.array([[0.2, 0.0, 0.0], [0.0, -0.1, 0.0]])  # B x 3: m/s, m/s, rad/s
+    >>> out = run_closed_loop(sim, ctrl, commands, num_steps=200)
+    >>> out.com_state.shape
+    (2, 200, 5)
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hierloco.components.kinematics import LegKinematics
+from hierloco.envs.batched_sim import BatchedSimulator, SimulationResult
+from hierloco.envs.frames import rotate_xy, world_to_local
+from hierloco.envs.robots import CONTROL_TIMESTEP, RobotSpec, get_robot
+
+
+class RaibertController:
+    """Velocity command -> joint targets for B robots, one call per 100 Hz control step.
+
+    Args:
+        robot: a registered name or a :class:`RobotSpec`.
+        num_robots: B.
+        gait_period: s (default: the robot's).
+        swing_height: foot lift h in m (default: the robot's).
+        feedback_gain: k of the footstep law, in s.
+        yaw_gain: k_yaw of the footstep rotation, in s.
+        integral_gain: gain in 1/s of the outer loop that integrates the velocity and yaw-rate errors into the
+            command the footstep law follows (it removes the steady-state error of the proportional law).
+        velocity_filter: time constant in s of the low-pass filter on the measured velocities.
+    """
+
+    def __init__(self, robot: str | RobotSpec, num_robots: int, *, gait_period: float | None = None,
+                 swing_height: float | None = None, feedback_gain: float = 0.05, yaw_gain: float = 0.05,
+                 integral_gain: float = 1.0, velocity_filter: float | None = None):
+        self.robot = get_robot(robot)
+        self.num_robots = int(num_robots)
+        self.kinematics = LegKinematics(self.robot)
+        self.gait_period = float(gait_period or self.robot.gait_period)
+        self.swing_height = float(swing_height if swing_height is not None else self.robot.swing_height)
+        self.feedback_gain = float(feedback_gain)
+        self.yaw_gain = float(yaw_gain)
+        self.integral_gain = float(integral_gain)
+        self.velocity_filter = float(velocity_filter or self.gait_period)
+        self.dt = CONTROL_TIMESTEP
+        steps = self.gait_period / self.dt
+        if abs(steps - round(steps)) > 1e-6 or round(steps) < 2:
+            raise ValueError(f"gait_period {self.gait_period} s must be a whole number (>= 2) of control steps")
+        self.steps_per_period = int(round(steps))
+        groups = self.robot.gait_groups
+        self.num_groups = len(groups)
+        if self.steps_per_period % self.num_groups:
+            raise ValueError(f"{self.steps_per_period} steps per gait period do not split into {self.num_groups} "
+                             "equal swing phases")
+        self.swing_steps = self.steps_per_period // self.num_groups
+        self.stance_duration = self.gait_period - self.swing_steps * self.dt
+        self.leg_group = np.array([next(g for g, grp in enumerate(groups) if leg in grp)
+                                   for leg in self.robot.leg_names])
+        # nominal footholds: the standing feet, centred under the centre of mass
+        self.nominal_feet = self.kinematics.forward(self.kinematics.standing_pose)  # L x 3, base frame
+        self.nominal_feet[:, :2] += self.kinematics.com_offset[:2] - self.nominal_feet[:, :2].mean(0)
+        self.reset()
+
+    def reset(self, mask: np.ndarray | None = None) -> None:
+        """Restarts the gait clock (all robots) or puts the robots in ``mask`` back to standing feet."""
+        b, legs = self.num_robots, self.kinematics.num_legs
+        if mask is None:
+            self.step_count = 0
+            self.feet = np.broadcast_to(self.nominal_feet, (b, legs, 3)).copy()
+            self.liftoff = self.feet.copy()
+            self.joint_targets = np.broadcast_to(self.kinematics.standing_pose, (b, self.robot.num_joints)).copy()
+            self.velocity = np.zeros((b, 2))
+            self.yaw_rate = np.zeros(b)
+            self.correction = np.zeros((b, 3))
+            return
+        index = np.flatnonzero(np.asarray(mask, dtype=bool))
+        self.feet[index] = self.nominal_feet
+        self.liftoff[index] = self.nominal_feet
+        self.joint_targets[index] = self.kinematics.standing_pose
+        self.velocity[index] = 0.0
+        self.yaw_rate[index] = 0.0
+        self.correction[index] = 0.0
+
+    def swing_progress(self, step: int | None = None) -> np.ndarray:
+        """``L`` swing progress in (0, 1] of each leg at control step ``step`` (0 for a leg in stance)."""
+        step = self.step_count if step is None else step
+        in_period = step % self.steps_per_period
+        group, offset = divmod(in_period, self.swing_steps)
+        progress = np.zeros(self.kinematics.num_legs)
+        progress[self.leg_group == group] = (offset + 1) / self.swing_steps
+        return progress
+
+    def act(self, command: np.ndarray, velocity_local: np.ndarray, yaw_rate: np.ndarray) -> np.ndarray:
+        """Joint targets ``B x J`` (rad) for the next control step.
+
+        Args:
+            command: ``B x 3`` desired ``(vx, vy, yaw_rate)`` in the local frame (m/s, m/s, rad/s).
+            velocity_local: ``B x 2`` measured CoM velocity in the local frame, m/s.
+            yaw_rate: ``B`` measured yaw rate, rad/s.
+        """
+        command = np.asarray(command, dtype=np.float64)
+        alpha = self.dt / self.velocity_filter
+        self.velocity += alpha * (velocity_local - self.velocity)
+        self.yaw_rate += alpha * (yaw_rate - self.yaw_rate)
+        measured = np.concatenate([self.velocity, self.yaw_rate[:, None]], -1)
+        self.correction += self.integral_gain * self.dt * (command - measured)
+        v_des, w_des = command[:, :2] + self.correction[:, :2], command[:, 2] + self.correction[:, 2]
+
+        progress = self.swing_progress()
+        swing = progress > 0
+        starting = progress == 1.0 / self.swing_steps
+        # stance feet: move against the commanded body motion
+        stance_xy = rotate_xy(self.feet[..., :2], -w_des[:, None] * self.dt) - v_des[:, None, :] * self.dt
+        # swing feet: lift-off -> Raibert touchdown point
+        self.liftoff[:, starting] = self.feet[:, starting]
+        half = 0.5 * self.stance_duration
+        turn = w_des * half + self.yaw_gain * (self.yaw_rate - command[:, 2])
+        touchdown = rotate_xy(self.nominal_feet[None, :, :2], turn[:, None])
+        touchdown = touchdown + (half * v_des + self.feedback_gain * (self.velocity - command[:, :2]))[:, None, :]
+        blend = 0.5 * (1.0 - np.cos(np.pi * progress))[None, :, None]
+        swing_xy = self.liftoff[..., :2] + blend * (touchdown - self.liftoff[..., :2])
+        self.feet[..., :2] = np.where(swing[None, :, None], swing_xy, stance_xy)
+        self.feet[..., 2] = self.nominal_feet[:, 2] + self.swing_height * np.sin(np.pi * progress)
+
+        self.joint_targets = self.kinematics.inverse(self.feet, self.joint_targets)
+        self.step_count += 1
+        return self.joint_targets.copy()
+
+
+def run_closed_loop(sim: BatchedSimulator, controller: RaibertController, commands: np.ndarray,
+                    num_steps: int, ramp_steps: int = 0) -> SimulationResult:
+    """Runs ``controller`` on ``sim`` for ``num_steps`` control steps at fixed ``commands`` (``B x 3``).
+
+    The command ramps up linearly over the first ``ramp_steps``. Returns the per-step :class:`SimulationResult`
+    with an extra attribute ``joint_targets`` (``B x T x J``).
+    """
+    commands = np.asarray(commands, dtype=np.float64)
+    b = sim.num_robots
+    state = sim.com_state
+    velocity = world_to_local(state[:, 3:5], state[:, 2])
+    yaw_rate = np.zeros(b)
+    results, targets = [], []
+    for n in range(num_steps):
+        scale = min(1.0, (n + 1) / ramp_steps) if ramp_steps else 1.0
+        action = controller.act(commands * scale, velocity, yaw_rate)
+        out = sim.run(action[:, None, :])
+        velocity, yaw_rate = out.com_velocity_local[:, 0], out.yaw_rate[:, 0]
+        results.append(out)
+        targets.append(action)
+    merged = SimulationResult(**{
+        name: np.concatenate([getattr(r, name) for r in results], axis=1)
+        for name in SimulationResult.__dataclass_fields__
+    })
+    merged.fallen = np.logical_or.accumulate(merged.fallen, axis=1)
+    merged.unstable = np.logical_or.accumulate(merged.unstable, axis=1)
+    merged.joint_targets = np.stack(targets, axis=1)
+    return merged
