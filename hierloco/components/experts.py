@@ -91,6 +91,7 @@ class RaibertController:
             self.velocity = np.zeros((b, 2))
             self.yaw_rate = np.zeros(b)
             self.correction = np.zeros((b, 3))
+            self.frozen = False
             return
         index = np.flatnonzero(np.asarray(mask, dtype=bool))
         self.feet[index] = self.nominal_feet
@@ -99,6 +100,14 @@ class RaibertController:
         self.velocity[index] = 0.0
         self.yaw_rate[index] = 0.0
         self.correction[index] = 0.0
+
+    def freeze(self, frozen: bool = True) -> None:
+        """Stops (or resumes) the feedback: the filtered velocities and the integral correction are held.
+
+        A frozen controller at steady state produces an exactly periodic joint-target pattern, the open-loop gait
+        an expert is recorded as.
+        """
+        self.frozen = frozen
 
     def swing_progress(self, step: int | None = None) -> np.ndarray:
         """``L`` swing progress in (0, 1] of each leg at control step ``step`` (0 for a leg in stance)."""
@@ -118,11 +127,12 @@ class RaibertController:
             yaw_rate: ``B`` measured yaw rate, rad/s.
         """
         command = np.asarray(command, dtype=np.float64)
-        alpha = self.dt / self.velocity_filter
-        self.velocity += alpha * (velocity_local - self.velocity)
-        self.yaw_rate += alpha * (yaw_rate - self.yaw_rate)
-        measured = np.concatenate([self.velocity, self.yaw_rate[:, None]], -1)
-        self.correction += self.integral_gain * self.dt * (command - measured)
+        if not self.frozen:
+            alpha = self.dt / self.velocity_filter
+            self.velocity += alpha * (velocity_local - self.velocity)
+            self.yaw_rate += alpha * (yaw_rate - self.yaw_rate)
+            measured = np.concatenate([self.velocity, self.yaw_rate[:, None]], -1)
+            self.correction += self.integral_gain * self.dt * (command - measured)
         v_des, w_des = command[:, :2] + self.correction[:, :2], command[:, 2] + self.correction[:, 2]
 
         progress = self.swing_progress()
@@ -147,10 +157,11 @@ class RaibertController:
 
 
 def run_closed_loop(sim: BatchedSimulator, controller: RaibertController, commands: np.ndarray,
-                    num_steps: int, ramp_steps: int = 0) -> SimulationResult:
+                    num_steps: int, ramp_steps: int = 0, freeze_after: int | None = None) -> SimulationResult:
     """Runs ``controller`` on ``sim`` for ``num_steps`` control steps at fixed ``commands`` (``B x 3``).
 
-    The command ramps up linearly over the first ``ramp_steps``. Returns the per-step :class:`SimulationResult`
+    The command ramps up linearly over the first ``ramp_steps``; the feedback is frozen after ``freeze_after``
+    steps (see :meth:`RaibertController.freeze`). Returns the per-step :class:`SimulationResult`
     with an extra attribute ``joint_targets`` (``B x T x J``).
     """
     commands = np.asarray(commands, dtype=np.float64)
@@ -160,6 +171,8 @@ def run_closed_loop(sim: BatchedSimulator, controller: RaibertController, comman
     yaw_rate = np.zeros(b)
     results, targets = [], []
     for n in range(num_steps):
+        if n == freeze_after:
+            controller.freeze()
         scale = min(1.0, (n + 1) / ramp_steps) if ramp_steps else 1.0
         action = controller.act(commands * scale, velocity, yaw_rate)
         out = sim.run(action[:, None, :])

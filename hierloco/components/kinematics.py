@@ -58,14 +58,17 @@ class LegKinematics:
         damping: damped least-squares damping, in m.
         iterations: maximum IK iterations per call.
         tolerance: IK stops when every foot is this close to its target, in m.
+        max_step: largest joint change per iteration, in rad (a trust region for far targets).
     """
 
     def __init__(self, robot: str | RobotSpec, *, damping: float = 1e-3, iterations: int = 50,
-                 tolerance: float = 1e-6):
+                 tolerance: float = 1e-6, max_step: float = 0.2):
         self.robot = get_robot(robot)
         self.damping = damping
         self.iterations = iterations
         self.tolerance = tolerance
+        self.max_step = max_step
+        self.far_damping = 0.5
         model = compile_model(self.robot)
         base = model.body(self.robot.base_body).id
         data = mujoco.MjData(model)
@@ -167,14 +170,54 @@ class LegKinematics:
         return q
 
     def _leg_inverse(self, leg, target, q, low, high):
+        q = self._descend(leg, target, q, low, high)
+        # targets not reached (out of reach, or a local minimum at the limits): restart from a coarse grid of
+        # poses over the joint box and keep the closest result
+        error = np.linalg.norm(self._leg_forward(leg, q, False)[0] - target, axis=-1)
+        stuck = error > 10 * self.tolerance + 1e-4
+        if np.any(stuck):
+            starts = self._restart_poses(low, high)  # K x n
+            far_target = target[stuck]  # M x 3
+            k, m = len(starts), len(far_target)
+            trial = self._descend(leg, np.repeat(far_target, k, 0), np.tile(starts, (m, 1)), low, high,
+                                  iterations=4 * self.iterations)
+            trial_error = np.linalg.norm(self._leg_forward(leg, trial, False)[0] - np.repeat(far_target, k, 0), axis=-1)
+            best = trial_error.reshape(m, k).argmin(1)
+            improved = trial_error.reshape(m, k)[np.arange(m), best] < error[stuck]
+            chosen = trial.reshape(m, k, -1)[np.arange(m), best]
+            fixed = q[stuck]
+            fixed[improved] = chosen[improved]
+            q[stuck] = fixed
+        return q
+
+    @staticmethod
+    def _restart_poses(low, high, per_joint: int = 4) -> np.ndarray:
+        low, high = np.maximum(low, -np.pi), np.minimum(high, np.pi)
+        axes = [lo + (hi - lo) * (np.arange(per_joint) + 0.5) / per_joint for lo, hi in zip(low, high)]
+        return np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, len(low))
+
+    def _descend(self, leg, target, q, low, high, iterations=None):
+        """Damped least squares; joints at a limit that the step pushes further out are frozen for that step."""
         damping2 = self.damping**2
-        eye = np.eye(3)
-        for _ in range(self.iterations):
+        q = q.copy()
+        for _ in range(iterations or self.iterations):
             foot, jac = self._leg_forward(leg, q, True)
             error = target - foot
             if np.all(np.abs(error) < self.tolerance):
                 break
-            jjt = jac @ np.swapaxes(jac, -1, -2) + damping2 * eye
-            step = np.swapaxes(jac, -1, -2) @ np.linalg.solve(jjt, error[..., None])
-            q = np.clip(q + step[..., 0], low, high)
+            # damping grows with the error: Gauss-Newton near the target, gradient-like far from it
+            lam2 = damping2 + (self.far_damping * np.linalg.norm(error, axis=-1))[..., None, None] ** 2
+            step = self._dls_step(jac, error, lam2)
+            blocked = ((q <= low) & (step < 0)) | ((q >= high) & (step > 0))
+            if np.any(blocked):
+                step = self._dls_step(jac * ~blocked[..., None, :], error, lam2)
+            largest = np.abs(step).max(-1, keepdims=True)
+            step = step * np.minimum(1.0, self.max_step / np.maximum(largest, 1e-12))
+            q = np.clip(q + step, low, high)
         return q
+
+    @staticmethod
+    def _dls_step(jac, error, damping2):
+        jac_t = np.swapaxes(jac, -1, -2)
+        jjt = jac @ jac_t + damping2 * np.eye(3)
+        return (jac_t @ np.linalg.solve(jjt, error[..., None]))[..., 0]
