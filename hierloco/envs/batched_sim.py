@@ -124,6 +124,7 @@ class BatchedSimulator:
         self.state[index] = self._standing_state
         if self.init_joint_noise > 0 and len(index):
             noise = self._rng.uniform(-self.init_joint_noise, self.init_joint_noise, (len(index), len(self._joint_qpos)))
+            noise[:, self._locked] = 0.0  # disabled legs start (and stay) at their standing angles
             self.state[np.ix_(index, 1 + self._joint_qpos)] += noise
         return self.com_state
 

@@ -55,6 +55,7 @@ class LocomotionPhysics(dm_mujoco.Physics):
         physics._qpos_idx = joint_qpos_indices(physics.model.ptr, robot)
         physics._qvel_idx = joint_qvel_indices(physics.model.ptr, robot)
         physics._foot_sites = [physics.model.ptr.site(leg.foot_site).id for leg in robot.legs]
+        physics._locked_joints = robot.leg_joint_indices(tuple(disabled_legs))
         return physics
 
     @contextlib.contextmanager
@@ -131,6 +132,7 @@ class LocomotionTask(base.Task):
         robot = physics.robot
         qpos = standing_qpos(physics.model.ptr, robot)
         noise = self.random.uniform(-self.init_joint_noise, self.init_joint_noise, robot.num_joints)
+        noise[physics._locked_joints] = 0.0  # disabled legs start (and stay) at their standing angles
         qpos[physics._qpos_idx] += noise
         physics.data.qpos[:] = qpos
         physics.data.qvel[:] = 0.0

@@ -36,8 +36,8 @@ def make_env(
     """
     robot = get_robot(robot)
     robot.leg_joint_indices(disabled_legs)  # names checked before any work
-    base = DMControlWrapper(make_dm_env(robot, time_limit=time_limit, init_joint_noise=init_joint_noise),
-                            device=device)
+    base = DMControlWrapper(make_dm_env(robot, disabled_legs=disabled_legs, time_limit=time_limit,
+                                        init_joint_noise=init_joint_noise), device=device)
     transforms = [DoubleToFloat(), CoMState()]
     if disabled_legs:
         transforms.append(DisableLegs(robot, disabled_legs))

@@ -1,0 +1,62 @@
+"""hierloco's performance suite (SPEC 10): every number comes from this one run, as ratios on this machine.
+
+    ./run.sh bench                                  # A1 and Daisy, B = 64, best of 8
+    ./run.sh bench --robots a1 --num-robots 32 --repeats 3
+    ./run.sh bench --check                          # exit 1 when a target ratio is missed
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+import bench_sim
+
+from hierloco.envs import get_robot
+
+
+def _positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
+    return value
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--robots", nargs="+", default=["a1", "daisy"], help="registered robot names")
+    parser.add_argument("--num-robots", type=_positive_int, default=64, help="B, copies simulated together")
+    parser.add_argument("--control-steps", type=_positive_int, default=100,
+                        help="control steps per batched call (one latent action: 100 = 500 physics steps)")
+    parser.add_argument("--repeats", type=_positive_int, default=8,
+                        help="timed calls of each workload after a warm-up, interleaved; the fastest is kept")
+    parser.add_argument("--torchrl-steps", type=_positive_int, default=500, help="env steps per TorchRL rollout")
+    parser.add_argument("--nthread", type=_positive_int, default=os.cpu_count() or 1, help="simulation threads")
+    parser.add_argument("--check", action="store_true", help="exit 1 when a target ratio is missed")
+    args = parser.parse_args(argv)
+    for name in args.robots:
+        try:
+            get_robot(name)
+        except ValueError as error:
+            parser.error(str(error))
+    return args
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    rows = []
+    for name in args.robots:
+        print(f"benchmarking {name} ...", flush=True)
+        rows.append(bench_sim.benchmark_robot(name, num_robots=args.num_robots, control_steps=args.control_steps,
+                                              repeats=args.repeats, torchrl_steps=args.torchrl_steps,
+                                              nthread=args.nthread))
+    print()
+    print(bench_sim.format_table(rows, args.nthread))
+    if args.check and not bench_sim.targets_met(rows):
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
