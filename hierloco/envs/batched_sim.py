@@ -128,6 +128,10 @@ class BatchedSimulator:
             self.state[np.ix_(index, 1 + self._joint_qpos)] += noise
         return self.com_state
 
+    def seed(self, seed: int | None) -> None:
+        """Re-seeds the reset noise."""
+        self._rng = np.random.default_rng(seed)
+
     def set_state(self, state: np.ndarray, mask: np.ndarray | None = None) -> None:
         """Sets full physics states (``B x nstate``, or ``M x nstate`` for the ``M`` copies in ``mask``)."""
         index = slice(None) if mask is None else np.flatnonzero(np.asarray(mask, dtype=bool))

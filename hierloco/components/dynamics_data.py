@@ -1,0 +1,119 @@
+"""CoM dynamics data: random high-level actions chained on B robots, collected with a TorchRL collector (SPEC 5.3).
+
+Each action is drawn uniformly from the low level's action space (the latent box for LAT, the expert indices for
+LIB, the command box for IK), held for one action (N control steps), and actions are chained; an episode is reset
+after ``episode_length`` actions and whenever a robot falls. Transitions during which a robot fell or the physics
+blew up are counted and dropped: they never reach the model.
+
+Example:
+    >>> from hierloco.components.expert_library import build_expert_library
+    >>> from hierloco.components.low_level import ExpertReplayLowLevel
+    >>> from hierloco.envs.latent_env import LatentActionEnv
+    >>> env = LatentActionEnv(ExpertReplayLowLevel(build_expert_library("daisy", 3, progress=False)), num_robots=4)
+    >>> data = collect_transitions(env, 8, seed=0, progress=False)
+    >>> data.com_state.shape, data.action.shape
+    ((8, 5), (8, 1))
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+from tensordict import TensorDictBase
+from tensordict.nn import TensorDictModuleBase
+from torchrl.collectors import Collector
+from torchrl.data import Categorical
+from tqdm.auto import tqdm
+
+from hierloco.envs.latent_env import LatentActionEnv
+from hierloco.io import ArtifactError, load_arrays, save_arrays
+
+
+class UniformActionPolicy(TensorDictModuleBase):
+    """Writes ``action`` drawn uniformly from ``action_spec`` (box or finite set), from its own seeded generator."""
+
+    def __init__(self, action_spec, seed: int = 0):
+        super().__init__()
+        self.in_keys, self.out_keys = [], ["action"]
+        self.action_spec = action_spec
+        self.generator = torch.Generator().manual_seed(seed)
+
+    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        spec = self.action_spec
+        shape = tensordict.batch_size + spec.shape[len(tensordict.batch_size):]
+        if isinstance(spec, Categorical):
+            action = torch.randint(spec.n, shape, generator=self.generator, dtype=spec.dtype)
+        else:
+            low, high = spec.space.low, spec.space.high
+            action = low + (high - low) * torch.rand(shape, generator=self.generator)
+        return tensordict.set("action", action.to(spec.device))
+
+
+@dataclass
+class TransitionData:
+    """M transitions ``(com_state, action) -> next_com_state``, world frame ``(x, y, yaw, vx, vy)``."""
+
+    com_state: np.ndarray
+    action: np.ndarray
+    next_com_state: np.ndarray
+    metadata: dict = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return len(self.com_state)
+
+    def save(self, path: str | os.PathLike) -> None:
+        save_arrays(path, {"com_state": self.com_state, "action": self.action,
+                           "next_com_state": self.next_com_state}, {**self.metadata, "kind": "transitions"})
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> "TransitionData":
+        arrays, metadata = load_arrays(path)
+        if metadata.pop("kind", None) != "transitions" or set(arrays) != {"com_state", "action", "next_com_state"}:
+            raise ArtifactError(f"{path} is not a transitions file")
+        return cls(**arrays, metadata=metadata)
+
+
+def collect_transitions(env: LatentActionEnv, num_transitions: int, *, episode_length: int = 20, seed: int = 0,
+                        progress: bool = True) -> TransitionData:
+    """Collects ``num_transitions`` valid transitions on ``env`` with uniformly random actions.
+
+    ``metadata`` records the low level, the seed, how many transitions were dropped for falls or blow-ups, and how
+    many actions were executed in all.
+    """
+    if int(num_transitions) < 1:
+        raise ValueError(f"num_transitions must be positive, got {num_transitions}")
+    if int(episode_length) < 1:
+        raise ValueError(f"episode_length must be positive, got {episode_length}")
+    env.set_seed(seed)
+    num_robots = env.batch_size[0]
+    collector = Collector(env, UniformActionPolicy(env.action_spec, seed), frames_per_batch=num_robots,
+                          total_frames=-1, max_frames_per_traj=int(episode_length), reset_at_each_iter=False,
+                          auto_register_policy_transforms=False)
+    states, actions, next_states = [], [], []
+    kept = dropped = 0
+    bar = tqdm(total=int(num_transitions), desc=f"dynamics data ({env.robot.name})", disable=not progress)
+    try:
+        for batch in collector:
+            batch = batch.reshape(-1)
+            valid = ~batch["next", "terminated"].reshape(-1)
+            dropped += int((~valid).sum())
+            take = min(int(valid.sum()), int(num_transitions) - kept)
+            index = torch.nonzero(valid).reshape(-1)[:take]
+            states.append(batch["com_state"][index])
+            actions.append(batch["action"][index].reshape(take, -1).to(torch.float32))
+            next_states.append(batch["next", "com_state"][index])
+            kept += take
+            bar.update(take)
+            if kept >= num_transitions:
+                break
+    finally:
+        collector.shutdown()
+        bar.close()
+    metadata = {"low_level": env.low_level.describe(), "seed": int(seed), "episode_length": int(episode_length),
+                "num_robots": int(num_robots), "dropped_failures": dropped, "actions_executed": kept + dropped,
+                "disabled_legs": list(env.sim.disabled_legs)}
+    return TransitionData(torch.cat(states).double().numpy(), torch.cat(actions).double().numpy(),
+                          torch.cat(next_states).double().numpy(), metadata)

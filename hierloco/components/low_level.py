@@ -1,0 +1,141 @@
+"""Low levels: what turns one high-level action into N control steps of joint targets on the batched simulator.
+
+A low level has an action space (a box, or a finite set) and a ``run(sim, actions)`` that executes one action on
+every copy of a :class:`BatchedSimulator`. The latent-action environment, the CoM dynamics data and the planners
+work with any of them:
+
+- :class:`LatentLowLevel` (LAT): the action is a latent z; all N targets come from ``pi(., z)`` in one forward pass.
+- :class:`ExpertReplayLowLevel` (LIB): the action is an expert index; the expert's recorded pattern is replayed.
+- :class:`CommandLowLevel` (IK): the action is a desired CoM velocity; the Raibert controller runs closed loop.
+
+Example:
+    >>> import numpy as np
+    >>> from hierloco.components.expert_library import build_expert_library
+    >>> from hierloco.envs.batched_sim import BatchedSimulator
+    >>> library = build_expert_library("daisy", 3, progress=False)
+    >>> low = ExpertReplayLowLevel(library)
+    >>> out = low.run(BatchedSimulator("daisy", 2), np.array([[0], [2]]))
+    >>> out.com_state.shape
+    (2, 100, 5)
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from hierloco.components.expert_library import ExpertLibrary
+from hierloco.components.experts import RaibertController, run_closed_loop
+from hierloco.components.gait_policy import TrainedGaitPolicy
+from hierloco.envs.batched_sim import BatchedSimulator, SimulationResult
+from hierloco.envs.robots import RobotSpec, get_robot
+
+
+class LowLevel:
+    """Base class: an action box ``action_low``/``action_high`` (``A``) and ``run``.
+
+    ``num_choices`` is ``None`` for a continuous box and the number of actions for a finite set (then the action is
+    a single index, ``A = 1``).
+    """
+
+    robot: RobotSpec
+    steps_per_action: int
+    action_low: np.ndarray
+    action_high: np.ndarray
+    num_choices: int | None = None
+    kind: str = "low_level"
+
+    @property
+    def action_dim(self) -> int:
+        return len(self.action_low)
+
+    def run(self, sim: BatchedSimulator, actions: np.ndarray) -> SimulationResult:
+        """Executes one action (``B x A``) on every copy of ``sim``; returns the ``B x N`` per-step result."""
+        raise NotImplementedError
+
+    def reset(self, mask: np.ndarray | None = None) -> None:
+        """Forgets any internal state for the copies in ``mask`` (default all); stateless low levels ignore it."""
+
+    def describe(self) -> dict:
+        """What identifies this low level (stored with the data collected on it)."""
+        return {"kind": self.kind, "robot": self.robot.name, "steps_per_action": self.steps_per_action,
+                "action_low": np.asarray(self.action_low).tolist(), "action_high": np.asarray(self.action_high).tolist(),
+                "num_choices": self.num_choices}
+
+    def _check(self, sim: BatchedSimulator, actions: np.ndarray) -> np.ndarray:
+        actions = np.asarray(actions, dtype=np.float64)
+        if actions.shape != (sim.num_robots, self.action_dim):
+            raise ValueError(f"actions must be B x A = {sim.num_robots} x {self.action_dim}, got {actions.shape}")
+        if not np.all(np.isfinite(actions)):
+            raise ValueError("actions contain NaN or inf")
+        return actions
+
+
+class LatentLowLevel(LowLevel):
+    """LAT: ``pi(., z)`` for a latent ``z`` in the learned latent box, open loop."""
+
+    kind = "latent"
+
+    def __init__(self, trained: TrainedGaitPolicy, robot: str | RobotSpec, device: str = "cpu"):
+        self.trained = trained
+        self.policy = trained.policy.to(device).eval()
+        self.device = device
+        self.robot = get_robot(robot)
+        self.steps_per_action = self.policy.steps_per_action
+        self.action_low = trained.latent_low.numpy().astype(np.float64)
+        self.action_high = trained.latent_high.numpy().astype(np.float64)
+
+    def patterns(self, latents: np.ndarray) -> np.ndarray:
+        """``B x Z`` latents -> ``B x N x J`` joint targets (rad)."""
+        with torch.no_grad():
+            z = torch.as_tensor(latents, dtype=torch.float32, device=self.device)
+            return self.policy.pattern(z).double().cpu().numpy()
+
+    def run(self, sim, actions):
+        return sim.run(self.patterns(self._check(sim, actions)))
+
+
+class ExpertReplayLowLevel(LowLevel):
+    """LIB: replays expert ``g``'s recorded N-step pattern; the action is the index ``g`` in ``[0, G)``."""
+
+    kind = "expert_replay"
+
+    def __init__(self, library: ExpertLibrary):
+        self.library = library
+        self.robot = get_robot(library.robot)
+        self.steps_per_action = library.steps_per_action
+        self.num_choices = library.num_experts
+        self.action_low = np.zeros(1)
+        self.action_high = np.full(1, library.num_experts - 1.0)
+
+    def run(self, sim, actions):
+        index = np.rint(self._check(sim, actions)[:, 0]).astype(np.int64)
+        if index.min() < 0 or index.max() >= self.num_choices:
+            raise ValueError(f"expert indices must be in [0, {self.num_choices}), got {index}")
+        return sim.run(self.library.joint_targets[index])
+
+
+class CommandLowLevel(LowLevel):
+    """IK: the Raibert controller tracks a desired ``(vx, vy, yaw_rate)`` for one action, closed loop.
+
+    The controller keeps its gait clock and feet across actions, so successive commands chain smoothly.
+    """
+
+    kind = "command"
+
+    def __init__(self, robot: str | RobotSpec, num_robots: int, steps_per_action: int = 100,
+                 command_low=None, command_high=None, **controller_kwargs):
+        self.robot = get_robot(robot)
+        self.steps_per_action = int(steps_per_action)
+        self.controller = RaibertController(self.robot, num_robots, **controller_kwargs)
+        self.action_low = np.asarray(self.robot.command_low if command_low is None else command_low, float)
+        self.action_high = np.asarray(self.robot.command_high if command_high is None else command_high, float)
+
+    def reset(self, mask=None):
+        self.controller.reset(mask)
+
+    def run(self, sim, actions):
+        if sim.num_robots != self.controller.num_robots:
+            raise ValueError(f"controller built for {self.controller.num_robots} robots, simulator has "
+                             f"{sim.num_robots}")
+        return run_closed_loop(sim, self.controller, self._check(sim, actions), self.steps_per_action)

@@ -1,0 +1,119 @@
+"""The latent-action environment: a TorchRL env whose step is one whole high-level action on B robots (SPEC 5.2).
+
+For LAT the action is a latent z in the learned latent box and a step runs ``pi(., z)`` for N control steps (1 s)
+on every robot through the batched simulator; with another low level the action is an expert index (LIB) or a
+velocity command (IK). Observations are the CoM state ``com_state`` = ``(x, y, yaw, vx, vy)`` (world frame) and
+``com_velocity_local`` (local yaw frame) at the end of the action. A robot that falls (or whose physics blows up)
+during the action is terminated. Rewards come from a task (see :mod:`hierloco.envs.tasks`); without one they are 0.
+
+Example:
+    >>> from torchrl.envs.utils import check_env_specs
+    >>> from hierloco.components.expert_library import build_expert_library
+    >>> from hierloco.components.low_level import ExpertReplayLowLevel
+    >>> env = LatentActionEnv(ExpertReplayLowLevel(build_expert_library("daisy", 3, progress=False)), num_robots=2)
+    >>> check_env_specs(env)
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+import torch
+from tensordict import TensorDict, TensorDictBase
+from torchrl.data import Bounded, Categorical, Composite, Unbounded
+from torchrl.envs import EnvBase
+
+from hierloco.components.low_level import LowLevel
+from hierloco.envs.batched_sim import BatchedSimulator
+from hierloco.envs.frames import world_to_local
+
+
+class LatentActionEnv(EnvBase):
+    """B robots stepped one high-level action at a time.
+
+    Args:
+        low_level: turns actions into joint targets (:mod:`hierloco.components.low_level`).
+        num_robots: B, the env's batch size.
+        disabled_legs: legs locked at their standing angles (the adverse setting).
+        init_joint_noise: rad of uniform noise on the standing joint angles at reset.
+        record: also return, per action, the ``N`` CoM states ``com_path`` (``B x N x 5``) and foot contacts
+            ``foot_contacts`` (``B x N x L``), for plots.
+        seed: seeds the reset noise.
+        nthread: simulation threads.
+    """
+
+    def __init__(self, low_level: LowLevel, num_robots: int = 1, *, disabled_legs: Sequence[str] = (),
+                 init_joint_noise: float = 0.02, record: bool = False, seed: int | None = None,
+                 nthread: int | None = None, device: str = "cpu"):
+        super().__init__(batch_size=torch.Size([int(num_robots)]), device=device)
+        self.low_level = low_level
+        self.robot = low_level.robot
+        self.record = record
+        self.sim = BatchedSimulator(self.robot, int(num_robots), disabled_legs=disabled_legs,
+                                    init_joint_noise=init_joint_noise, seed=seed, nthread=nthread)
+        self.steps_per_action = low_level.steps_per_action
+        b = int(num_robots)
+        observation = {"com_state": Unbounded((b, 5), device=self.device),
+                       "com_velocity_local": Unbounded((b, 2), device=self.device)}
+        if record:
+            n, legs = self.steps_per_action, len(self.robot.legs)
+            observation["com_path"] = Unbounded((b, n, 5), device=self.device)
+            observation["foot_contacts"] = Categorical(2, (b, n, legs), dtype=torch.bool, device=self.device)
+        self.observation_spec = Composite(observation, shape=(b,), device=self.device)
+        if low_level.num_choices is not None:
+            self.action_spec = Categorical(low_level.num_choices, (b, 1), dtype=torch.int64, device=self.device)
+        else:
+            low = torch.as_tensor(low_level.action_low, dtype=torch.float32)
+            high = torch.as_tensor(low_level.action_high, dtype=torch.float32)
+            self.action_spec = Bounded(low.expand(b, -1), high.expand(b, -1), (b, len(low)), device=self.device)
+        self.reward_spec = Unbounded((b, 1), device=self.device)
+        flag = Categorical(2, (b, 1), dtype=torch.bool, device=self.device)
+        self.done_spec = Composite(done=flag, terminated=flag.clone(), truncated=flag.clone(), shape=(b,),
+                                   device=self.device)
+        self.failures = 0  # robots that fell or blew up, over the env's life
+
+    def _observation(self, result=None) -> dict:
+        if result is None:
+            state = self.sim.com_state
+            velocity_local = world_to_local(state[:, 3:5], state[:, 2])
+        else:
+            state, velocity_local = result.com_state[:, -1], result.com_velocity_local[:, -1]
+        obs = {"com_state": torch.as_tensor(state, dtype=torch.float32, device=self.device),
+               "com_velocity_local": torch.as_tensor(velocity_local, dtype=torch.float32, device=self.device)}
+        if self.record:
+            if result is None:  # at reset: standing still, all feet down
+                n, legs = self.steps_per_action, len(self.robot.legs)
+                path = np.repeat(state[:, None], n, 1)
+                contacts = np.ones((len(state), n, legs), dtype=bool)
+            else:
+                path, contacts = result.com_state, result.foot_contacts
+            obs["com_path"] = torch.as_tensor(path, dtype=torch.float32, device=self.device)
+            obs["foot_contacts"] = torch.as_tensor(contacts, device=self.device)
+        return obs
+
+    def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
+        mask = None
+        if tensordict is not None and "_reset" in tensordict.keys():
+            mask = tensordict.get("_reset").reshape(-1).cpu().numpy()
+        self.sim.reset(mask)
+        self.low_level.reset(mask)
+        b = self.batch_size
+        done = torch.zeros((*b, 1), dtype=torch.bool, device=self.device)
+        return TensorDict({**self._observation(), "done": done, "terminated": done.clone(),
+                           "truncated": done.clone()}, batch_size=b, device=self.device)
+
+    def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
+        action = tensordict.get("action").detach().cpu().numpy().astype(np.float64)
+        result = self.low_level.run(self.sim, action.reshape(self.batch_size[0], -1))
+        failed = result.failed[:, -1]
+        self.failures += int(failed.sum())
+        terminated = torch.as_tensor(failed, device=self.device)[:, None]
+        b = self.batch_size
+        return TensorDict({**self._observation(result),
+                           "reward": torch.zeros((*b, 1), device=self.device),
+                           "done": terminated.clone(), "terminated": terminated,
+                           "truncated": torch.zeros_like(terminated)}, batch_size=b, device=self.device)
+
+    def _set_seed(self, seed: int | None) -> None:
+        self.sim.seed(seed)
