@@ -1,0 +1,392 @@
+"""The CoM dynamics model: a delta model in the robot's local frame over one latent action (SPEC 5.3).
+
+The CoM state is ``(x, y, yaw, vx, vy)`` in the world frame (m, rad, m/s). Over one action ``a`` (a latent z, an
+expert index as a float or a velocity command: any ``A``-vector) the model predicts
+
+    ``(dx, dy, dyaw, vx', vy') = f(vx, vy, a)``
+
+with every quantity in the local frame of the robot at the START of the action: ``(vx, vy)`` the current velocity,
+``(dx, dy)`` the displacement, ``dyaw`` the yaw change wrapped to (-pi, pi] (so one action turns by less than half
+a turn), and ``(vx', vy')`` the next velocity, still in the start frame. The prediction does not depend on the
+position or heading, which makes it the same everywhere in the world. :func:`local_transition` turns world-frame
+state pairs into training pairs and :func:`apply_delta` turns a prediction back into a world-frame next state.
+
+The network is an MLP with 2 hidden layers of 512 ReLU units on standardised inputs predicting standardised outputs;
+the statistics are buffers, so the module maps physical units to physical units. :func:`train_com_model` fits it by
+MSE on the standardised outputs with Adam, holds out a seeded random 10 % and stops early on the held-out loss.
+
+Example:
+    >>> import torch
+    >>> model = CoMDynamicsModel(action_dim=3, hidden=64)
+    >>> com_state = torch.zeros(4, 1, 5)  # B x 1 x 5: B robots at the origin, at rest
+    >>> model.predict(com_state, torch.rand(4, 8000, 3)).shape  # B x S next states for S sampled actions
+    torch.Size([4, 8000, 5])
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torch import nn
+from tqdm.auto import tqdm
+
+from hierloco.envs.frames import local_to_world, world_to_local, wrap_angle
+from hierloco.io import ArtifactError, atomic_path
+
+CHECKPOINT_FORMAT = 1
+CHECKPOINT_KIND = "com_model"
+OUTPUT_NAMES = ("dx", "dy", "dyaw", "vx_next", "vy_next")
+MIN_TRANSITIONS = 10
+
+
+def _as_float_tensor(x) -> torch.Tensor:
+    tensor = torch.as_tensor(x)
+    return tensor if tensor.is_floating_point() else tensor.to(torch.get_default_dtype())
+
+
+def _check_last_dim(name: str, tensor: torch.Tensor, size: int) -> None:
+    if tensor.ndim == 0 or tensor.shape[-1] != size:
+        raise ValueError(f"{name} must have a last dimension of {size}, got shape {tuple(tensor.shape)}")
+
+
+def local_transition(com_state, next_com_state) -> tuple[torch.Tensor, torch.Tensor]:
+    """World-frame CoM state pairs -> the model's input velocity and target delta.
+
+    Args:
+        com_state: ``... x 5`` states ``(x, y, yaw, vx, vy)`` at the start of an action, world frame (m, rad, m/s).
+        next_com_state: ``... x 5`` states at its end, same frame and units. NumPy arrays are accepted.
+
+    Returns:
+        ``velocity_local`` ``... x 2``, the current velocity in the current local frame (m/s), and ``delta``
+        ``... x 5`` = ``(dx, dy, dyaw, vx', vy')``: displacement (m) and next velocity (m/s) in the current local
+        frame, and the yaw change wrapped to (-pi, pi] (rad).
+
+    Example:
+        >>> import numpy as np
+        >>> s = np.array([1.0, 2.0, np.pi / 2, 0.0, 1.0])   # facing +y, walking forward at 1 m/s
+        >>> s2 = np.array([1.0, 3.0, np.pi / 2 + 0.1, -0.5, 1.0])
+        >>> v, delta = local_transition(s, s2)  # float64 torch tensors
+        >>> (v.round(decimals=4) + 0).tolist(), (delta.round(decimals=4) + 0).tolist()
+        ([1.0, 0.0], [1.0, 0.0, 0.1, 1.0, 0.5])
+    """
+    state, next_state = _as_float_tensor(com_state), _as_float_tensor(next_com_state)
+    _check_last_dim("com_state", state, 5)
+    _check_last_dim("next_com_state", next_state, 5)
+    dtype = torch.promote_types(state.dtype, next_state.dtype)
+    state, next_state = state.to(dtype), next_state.to(dtype)
+    yaw = state[..., 2]
+    velocity_local = world_to_local(state[..., 3:5], yaw)
+    displacement = world_to_local(next_state[..., :2] - state[..., :2], yaw)
+    dyaw = wrap_angle(next_state[..., 2] - yaw)
+    next_velocity = world_to_local(next_state[..., 3:5], yaw)
+    return velocity_local, torch.cat([displacement, dyaw[..., None], next_velocity], -1)
+
+
+def apply_delta(com_state, delta) -> torch.Tensor:
+    """The world-frame next state from a world-frame state ``... x 5`` and a local-frame ``delta`` ``... x 5``.
+
+    The inverse of :func:`local_transition`: ``apply_delta(s, local_transition(s, s2)[1])`` is ``s2`` with its yaw
+    wrapped to (-pi, pi]. Leading dimensions broadcast (a ``B x 1 x 5`` state with ``B x S x 5`` deltas gives
+    ``B x S x 5``).
+    """
+    state, delta = _as_float_tensor(com_state), _as_float_tensor(delta)
+    _check_last_dim("com_state", state, 5)
+    _check_last_dim("delta", delta, 5)
+    dtype = torch.promote_types(state.dtype, delta.dtype)
+    state, delta = state.to(dtype), delta.to(dtype)
+    yaw = state[..., 2]
+    position = state[..., :2] + local_to_world(delta[..., :2], yaw)
+    next_yaw = wrap_angle(yaw + delta[..., 2])
+    velocity = local_to_world(delta[..., 3:5], yaw)
+    return torch.cat([position, next_yaw[..., None], velocity], -1)
+
+
+def _nonzero_std(std: torch.Tensor) -> torch.Tensor:
+    """A constant feature or target keeps a scale of 1 rather than blowing up."""
+    return torch.where(std > 1e-6, std, torch.ones_like(std))
+
+
+class CoMDynamicsModel(nn.Module):
+    """``f(v_local, a)``: velocity ``... x 2`` (m/s) and action ``... x A`` -> delta ``... x 5`` (see the module doc).
+
+    Args:
+        action_dim: A, the size of the action vector.
+        hidden: width of the 2 hidden ReLU layers.
+        input_mean, input_std: ``2 + A`` statistics of ``(vx, vy, a)`` used to standardise the input.
+        output_mean, output_std: ``5`` statistics of the delta used to de-standardise the output.
+
+    Leading dimensions of the velocity and the action broadcast against each other.
+
+    Example:
+        >>> import torch
+        >>> model = CoMDynamicsModel(action_dim=2, hidden=32)
+        >>> model(torch.zeros(10, 2), torch.zeros(10, 2)).shape
+        torch.Size([10, 5])
+    """
+
+    def __init__(self, action_dim: int, hidden: int = 512, *, input_mean: torch.Tensor | None = None,
+                 input_std: torch.Tensor | None = None, output_mean: torch.Tensor | None = None,
+                 output_std: torch.Tensor | None = None):
+        super().__init__()
+        if int(action_dim) < 1:
+            raise ValueError(f"action_dim must be at least 1, got {action_dim}")
+        if int(hidden) < 1:
+            raise ValueError(f"hidden must be at least 1, got {hidden}")
+        self.action_dim, self.hidden = int(action_dim), int(hidden)
+        num_inputs = 2 + self.action_dim
+        self.net = nn.Sequential(
+            nn.Linear(num_inputs, self.hidden), nn.ReLU(),
+            nn.Linear(self.hidden, self.hidden), nn.ReLU(),
+            nn.Linear(self.hidden, 5),
+        )
+        for name, value, size, default in [("input_mean", input_mean, num_inputs, 0.0),
+                                           ("input_std", input_std, num_inputs, 1.0),
+                                           ("output_mean", output_mean, 5, 0.0),
+                                           ("output_std", output_std, 5, 1.0)]:
+            buffer = torch.full((size,), default) if value is None else torch.as_tensor(value).float().clone()
+            if buffer.shape != (size,):
+                raise ValueError(f"{name} must have shape ({size},), got {tuple(buffer.shape)}")
+            self.register_buffer(name, buffer)
+
+    def _inputs(self, velocity_local, action) -> torch.Tensor:
+        """``... x (2 + A)`` raw inputs, leading dimensions broadcast, in the model's dtype and device."""
+        dtype, device = self.input_mean.dtype, self.input_mean.device
+        velocity = torch.as_tensor(velocity_local, dtype=dtype, device=device)
+        action = torch.as_tensor(action, dtype=dtype, device=device)
+        _check_last_dim("velocity_local", velocity, 2)
+        _check_last_dim("action", action, self.action_dim)
+        batch = torch.broadcast_shapes(velocity.shape[:-1], action.shape[:-1])
+        return torch.cat([velocity.expand(*batch, 2), action.expand(*batch, self.action_dim)], -1)
+
+    def normalized(self, velocity_local, action) -> torch.Tensor:
+        """The standardised delta ``... x 5`` (what the training loss is computed on)."""
+        inputs = (self._inputs(velocity_local, action) - self.input_mean) / self.input_std
+        return self.net(inputs)
+
+    def forward(self, velocity_local, action) -> torch.Tensor:
+        """``... x 2`` local velocity (m/s), ``... x A`` action -> ``... x 5`` delta in physical units."""
+        return self.normalized(velocity_local, action) * self.output_std + self.output_mean
+
+    def predict(self, com_state, action) -> torch.Tensor:
+        """``... x 5`` world state, ``... x A`` action -> ``... x 5`` world state after one action."""
+        state = _as_float_tensor(com_state)
+        _check_last_dim("com_state", state, 5)
+        velocity_local = world_to_local(state[..., 3:5], state[..., 2])
+        return apply_delta(state.to(self.input_mean.device), self(velocity_local, action))
+
+    def config(self) -> dict:
+        return {"action_dim": self.action_dim, "hidden": self.hidden}
+
+
+@dataclass
+class TrainedCoMModel:
+    """A trained CoM dynamics model and its training report (see :func:`train_com_model`)."""
+
+    model: CoMDynamicsModel
+    metadata: dict
+
+    def save(self, path: str | os.PathLike) -> None:
+        """Writes a checkpoint (config, weights and statistics, metadata) to ``path`` atomically."""
+        payload = {"format": CHECKPOINT_FORMAT, "kind": CHECKPOINT_KIND, "config": self.model.config(),
+                   "state_dict": self.model.state_dict(), "metadata": self.metadata}
+        with atomic_path(path) as tmp:
+            torch.save(payload, tmp)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike, map_location="cpu") -> "TrainedCoMModel":
+        """Reads a checkpoint written by :meth:`save`; raises :class:`ArtifactError` naming the file if it is bad."""
+        try:
+            payload = torch.load(path, map_location=map_location, weights_only=True)
+        except FileNotFoundError:
+            raise ArtifactError(f"no such CoM model checkpoint: {path}") from None
+        except Exception as error:  # torch raises many types for a damaged file
+            raise ArtifactError(f"corrupted CoM model checkpoint {path}: {error}") from error
+        if not isinstance(payload, dict) or payload.get("kind") != CHECKPOINT_KIND \
+                or payload.get("format") != CHECKPOINT_FORMAT:
+            raise ArtifactError(f"{path} is not a CoM model checkpoint of format {CHECKPOINT_FORMAT}")
+        try:
+            model = CoMDynamicsModel(**payload["config"])
+            model.load_state_dict(payload["state_dict"])
+        except (KeyError, TypeError, ValueError, RuntimeError) as error:
+            raise ArtifactError(f"corrupted CoM model checkpoint {path}: {error}") from error
+        model.eval()
+        return cls(model, payload["metadata"])
+
+
+def holdout_split(num: int, holdout: float, seed: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """The seeded random split of ``num`` transitions used by :func:`train_com_model`: ``(train, heldout)`` indices.
+
+    ``round(holdout * num)`` transitions are held out, at least 1 and at most ``num - 1``.
+    """
+    num_heldout = min(max(1, round(holdout * num)), num - 1)
+    order = torch.randperm(num, generator=torch.Generator().manual_seed(seed))
+    return order[num_heldout:], order[:num_heldout]
+
+
+def _check_training_inputs(com_state, action, next_com_state, holdout) -> tuple[torch.Tensor, ...]:
+    tensors = {}
+    for name, value in [("com_state", com_state), ("action", action), ("next_com_state", next_com_state)]:
+        try:
+            tensors[name] = torch.as_tensor(value if isinstance(value, torch.Tensor) else np.asarray(value,
+                                                                                                     float))
+        except (TypeError, ValueError, RuntimeError) as error:
+            raise ValueError(f"{name} is not a numeric array: {error}") from error
+    state, act, next_state = (tensors[k].double() for k in ("com_state", "action", "next_com_state"))
+    for name, tensor, width in [("com_state", state, 5), ("next_com_state", next_state, 5)]:
+        if tensor.ndim != 2 or tensor.shape[1] != width:
+            raise ValueError(f"{name} must be M x 5 (x, y, yaw, vx, vy), got shape {tuple(tensor.shape)}")
+    if act.ndim != 2 or act.shape[1] < 1:
+        raise ValueError(f"action must be M x A (use action[:, None] for a scalar action), got shape "
+                         f"{tuple(act.shape)}")
+    lengths = {"com_state": len(state), "action": len(act), "next_com_state": len(next_state)}
+    if len(set(lengths.values())) != 1:
+        raise ValueError(f"com_state, action and next_com_state must have the same length M, got {lengths}")
+    for name, tensor in [("com_state", state), ("action", act), ("next_com_state", next_state)]:
+        bad = ~torch.isfinite(tensor).all(1)
+        if bad.any():
+            raise ValueError(f"{name} has NaN or inf in {int(bad.sum())} transition(s), first at index "
+                             f"{int(bad.nonzero()[0])}")
+    if len(state) < MIN_TRANSITIONS:
+        raise ValueError(f"need at least {MIN_TRANSITIONS} transitions to train and hold out, got {len(state)}")
+    if not 0.0 < holdout < 1.0:
+        raise ValueError(f"holdout must be a fraction in (0, 1), got {holdout}")
+    return state, act, next_state
+
+
+def train_com_model(
+    com_state,
+    action,
+    next_com_state,
+    *,
+    hidden: int = 512,
+    lr: float = 1e-3,
+    batch_size: int = 512,
+    holdout: float = 0.1,
+    max_epochs: int = 500,
+    patience: int = 20,
+    duration: float = 1.0,
+    seed: int = 0,
+    device: str = "cpu",
+    progress: bool = True,
+) -> TrainedCoMModel:
+    """Fits a :class:`CoMDynamicsModel` to M world-frame transitions ``com_state -> next_com_state`` under ``action``.
+
+    Args:
+        com_state, next_com_state: ``M x 5`` world-frame states ``(x, y, yaw, vx, vy)`` (m, rad, m/s), NumPy or
+            torch.
+        action: ``M x A`` actions held over each transition.
+        hidden: width of the 2 hidden layers. lr, batch_size: Adam step size and minibatch size.
+        holdout: fraction of the transitions held out (seeded random split, see :func:`holdout_split`).
+        max_epochs: upper bound on the epochs. patience: stop once the held-out loss has not improved for this many
+            epochs; the weights of the best epoch are kept.
+        duration: length of one action in s, used by the constant-velocity baseline.
+        seed: seeds the split, the initial weights and the minibatch order (the global RNG is left untouched).
+        device: where the network trains; the returned model is on the CPU.
+
+    Returns:
+        The model (eval mode) and a report in ``metadata``: ``heldout_rmse`` and ``constant_velocity_rmse`` (5 each,
+        physical units, order dx, dy, dyaw, vx', vy'; the baseline predicts ``(dx, dy) = v * duration``,
+        ``dyaw = 0``, ``v' = v``), ``heldout_loss`` (best standardised MSE) with its ``heldout_loss_history`` per
+        epoch, ``epochs``, ``best_epoch`` (1-based), ``train_seconds``, ``num_train``, ``num_heldout``, ``seed``.
+
+    Raises:
+        ValueError: for mismatched lengths, wrong trailing dimensions, NaN/inf, fewer than ``MIN_TRANSITIONS``
+            transitions or a bad hyperparameter, before training starts.
+
+    Example:
+        >>> import numpy as np
+        >>> rng = np.random.default_rng(0)
+        >>> state, action = rng.normal(size=(200, 5)), rng.uniform(-1, 1, size=(200, 2))
+        >>> next_state = state + 0.1 * rng.normal(size=(200, 5))
+        >>> trained = train_com_model(state, action, next_state, hidden=16, max_epochs=3, progress=False)
+        >>> trained.metadata["num_train"], trained.metadata["num_heldout"], len(trained.metadata["heldout_rmse"])
+        (180, 20, 5)
+    """
+    state, act, next_state = _check_training_inputs(com_state, action, next_com_state, holdout)
+    for name, value in [("hidden", hidden), ("batch_size", batch_size), ("max_epochs", max_epochs),
+                        ("patience", patience)]:
+        if int(value) < 1:
+            raise ValueError(f"{name} must be at least 1, got {value}")
+    for name, value in [("lr", lr), ("duration", duration)]:
+        if not (math.isfinite(value) and value > 0):
+            raise ValueError(f"{name} must be a positive number, got {value}")
+
+    velocity_local, delta = local_transition(state, next_state)
+    inputs = torch.cat([velocity_local, act], -1)
+    train_idx, heldout_idx = holdout_split(len(inputs), holdout, seed)
+    input_mean, input_std = inputs[train_idx].mean(0), _nonzero_std(inputs[train_idx].std(0, correction=0))
+    output_mean, output_std = delta[train_idx].mean(0), _nonzero_std(delta[train_idx].std(0, correction=0))
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(seed)
+        model = CoMDynamicsModel(act.shape[1], hidden, input_mean=input_mean, input_std=input_std,
+                                 output_mean=output_mean, output_std=output_std)
+    model.to(device)
+    generator = torch.Generator().manual_seed(seed)
+
+    def standardised(index):  # through the model's own float32 statistics, as in CoMDynamicsModel.normalized
+        x = (inputs[index].float() - model.input_mean.cpu()) / model.input_std.cpu()
+        y = (delta[index].float() - model.output_mean.cpu()) / model.output_std.cpu()
+        return x.to(device), y.to(device)
+
+    train_x, train_y = standardised(train_idx)
+    heldout_x, heldout_y = standardised(heldout_idx)
+    optimizer = torch.optim.Adam(model.parameters(), lr=lr)
+
+    def heldout_loss() -> float:
+        model.eval()
+        with torch.no_grad():
+            loss = float(((model.net(heldout_x) - heldout_y) ** 2).mean())
+        model.train()
+        return loss
+
+    history, best_loss, best_epoch = [], math.inf, 0
+    best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
+    start = time.perf_counter()
+    bar = tqdm(range(1, int(max_epochs) + 1), desc="CoM model", disable=not progress)
+    model.train()
+    for epoch in bar:
+        order = torch.randperm(len(train_x), generator=generator).to(device)
+        for begin in range(0, len(order), batch_size):
+            idx = order[begin:begin + batch_size]
+            loss = ((model.net(train_x[idx]) - train_y[idx]) ** 2).mean()
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            optimizer.step()
+        history.append(heldout_loss())
+        if history[-1] < best_loss:
+            best_loss, best_epoch = history[-1], epoch
+            best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
+        bar.set_postfix(heldout=f"{history[-1]:.4f}", best=f"{best_loss:.4f}")
+        if epoch - best_epoch >= patience:
+            break
+    bar.close()
+    train_seconds = time.perf_counter() - start
+    model.load_state_dict(best_state)
+    model.cpu().eval()
+
+    with torch.no_grad():
+        prediction = model(velocity_local[heldout_idx], act[heldout_idx]).double()
+    target = delta[heldout_idx]
+    v = velocity_local[heldout_idx]
+    baseline = torch.cat([v * duration, torch.zeros_like(v[:, :1]), v], -1)
+    metadata = {
+        "heldout_rmse": ((prediction - target) ** 2).mean(0).sqrt().tolist(),
+        "constant_velocity_rmse": ((baseline - target) ** 2).mean(0).sqrt().tolist(),
+        "output_names": list(OUTPUT_NAMES),
+        "heldout_loss": best_loss, "heldout_loss_history": history,
+        "epochs": len(history), "best_epoch": best_epoch, "train_seconds": train_seconds,
+        "num_train": len(train_idx), "num_heldout": len(heldout_idx), "seed": int(seed),
+        "action_dim": int(act.shape[1]), "hidden": int(hidden), "lr": float(lr), "batch_size": int(batch_size),
+        "holdout": float(holdout), "max_epochs": int(max_epochs), "patience": int(patience),
+        "duration": float(duration),
+    }
+    return TrainedCoMModel(model, metadata)
+
+
+__all__ = ["CoMDynamicsModel", "TrainedCoMModel", "apply_delta", "holdout_split", "local_transition",
+           "train_com_model"]
