@@ -93,3 +93,59 @@ class DisableLegs(Transform):
         if physics is None:
             raise RuntimeError("DisableLegs must sit on an env made by hierloco.envs.make_env (a dm_control env)")
         return physics
+
+
+class TaskTransform(Transform):
+    """Runs a task on a high-level env: task state in the observations, ``-cost`` as the reward, a time limit.
+
+    Adds ``task_episode`` (which target set each robot pursues, ``B x 1``) and ``task_step`` (``B x 1``, the
+    number of task steps done), sets the reward of each transition to ``-task.cost`` and truncates the episode after
+    ``task.num_steps`` steps. On :class:`hierloco.envs.latent_env.LatentActionEnv` with ``B`` robots, robot ``b``
+    pursues episode ``episodes[b]`` (default ``b % task.num_episodes``).
+
+    Args:
+        task: a :class:`hierloco.envs.tasks.Task`.
+        episodes: ``B`` episode indices, or ``None``.
+        state_key: the world-frame CoM state key.
+    """
+
+    def __init__(self, task, episodes: Sequence[int] | None = None, state_key: str = "com_state"):
+        super().__init__(in_keys=[state_key], out_keys=["task_episode", "task_step"])
+        self.task = task
+        self.state_key = state_key
+        self.episodes = None if episodes is None else torch.as_tensor(episodes, dtype=torch.int64)
+
+    def _episode_index(self, batch: torch.Size) -> torch.Tensor:
+        count = batch.numel()
+        episodes = self.episodes if self.episodes is not None else torch.arange(count) % self.task.num_episodes
+        if episodes.numel() != count or episodes.min() < 0 or episodes.max() >= self.task.num_episodes:
+            raise ValueError(f"episodes {episodes.tolist()} do not fit {count} robots and the task's "
+                             f"{self.task.num_episodes} episodes")
+        return episodes.reshape(*batch, 1)
+
+    def _reset(self, tensordict: TensorDictBase, tensordict_reset: TensorDictBase) -> TensorDictBase:
+        batch = tensordict_reset.batch_size
+        tensordict_reset.set("task_episode", self._episode_index(batch).to(tensordict_reset.device))
+        step = torch.zeros((*batch, 1), dtype=torch.int64, device=tensordict_reset.device)
+        if "_reset" in tensordict.keys() and "task_step" in tensordict.keys():
+            step = torch.where(tensordict.get("_reset"), step, tensordict.get("task_step"))
+        tensordict_reset.set("task_step", step)
+        return tensordict_reset
+
+    def _step(self, tensordict: TensorDictBase, next_tensordict: TensorDictBase) -> TensorDictBase:
+        episode, step = tensordict.get("task_episode"), tensordict.get("task_step")
+        cost = self.task.cost(tensordict.get(self.state_key), next_tensordict.get(self.state_key),
+                              episode.squeeze(-1), step.squeeze(-1))
+        next_tensordict.set("reward", -cost.unsqueeze(-1).to(next_tensordict.get("reward").dtype))
+        next_tensordict.set("task_episode", episode)
+        next_tensordict.set("task_step", step + 1)
+        over = step + 1 >= self.task.num_steps
+        next_tensordict.set("truncated", next_tensordict.get("truncated") | over)
+        next_tensordict.set("done", next_tensordict.get("done") | over)
+        return next_tensordict
+
+    def transform_observation_spec(self, observation_spec: Composite) -> Composite:
+        batch = observation_spec.shape
+        for key in ("task_episode", "task_step"):
+            observation_spec[key] = Unbounded((*batch, 1), dtype=torch.int64, device=observation_spec.device)
+        return observation_spec

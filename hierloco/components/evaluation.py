@@ -1,0 +1,77 @@
+"""Closed-loop MPC on the simulated robots: run a task's episodes with a planner and score them (SPEC 5.4, 6).
+
+Every episode of the task runs on its own robot of a :class:`LatentActionEnv` (8 goals -> 8 robots in one batched
+simulation). At each task step the planner chooses an action from the measured state with the world model, the
+robot executes it for one action (N control steps), and MPC re-plans from the new measured state. Episodes run their
+full length, so the cost covers every step; a robot that falls stays down, keeps paying the cost and is counted.
+
+Example:
+    >>> # env: a LatentActionEnv(record=True); planner: e.g. RandomShootingPlanner(CoMWorldModelEnv(model, ...))
+    >>> # rollout = run_task(env, planner, GoalReaching())  # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torchrl.envs import TransformedEnv
+from torchrl.envs.utils import step_mdp
+
+from hierloco.envs.latent_env import LatentActionEnv
+from hierloco.envs.tasks import Task, TaskResult
+from hierloco.envs.transforms import TaskTransform
+
+
+@dataclass
+class TaskRollout:
+    """What happened in a task's episodes.
+
+    Attributes:
+        result: per-episode costs and metrics (:class:`TaskResult`).
+        actions: ``E x T x A`` chosen actions.
+        com_paths: ``E x (T * N) x 5`` CoM states at 100 Hz (when the env records), else ``None``.
+        foot_contacts: ``E x (T * N) x L`` (when the env records), else ``None``.
+        fell: ``E`` bool, whether the robot fell (or blew up) during the episode.
+        plan_seconds: mean wall-clock of one planner call.
+    """
+
+    result: TaskResult
+    actions: np.ndarray
+    com_paths: np.ndarray | None
+    foot_contacts: np.ndarray | None
+    fell: np.ndarray
+    plan_seconds: float
+
+
+def run_task(env: LatentActionEnv, planner, task: Task, episodes=None) -> TaskRollout:
+    """Runs every episode of ``task`` with MPC (``planner``) on ``env``'s robots; ``planner.env`` is re-targeted
+    to ``task``. ``env`` needs one robot per episode (``episodes``: which episode each robot runs)."""
+    count = env.batch_size[0]
+    episodes = torch.arange(count) % task.num_episodes if episodes is None else torch.as_tensor(episodes)
+    if episodes.numel() != count:
+        raise ValueError(f"{count} robots for {episodes.numel()} episodes")
+    planner.env.set_task(task)
+    planner.reset()
+    task_env = TransformedEnv(env, TaskTransform(task, episodes))
+    td = task_env.reset()
+    steps, plan_time = [], 0.0
+    for _ in range(task.num_steps):
+        start = time.perf_counter()
+        td = planner(td)
+        plan_time += time.perf_counter() - start
+        td = task_env.step(td)
+        steps.append(td.exclude("next").update({"next": td.get("next")}).clone())
+        td = step_mdp(td)
+    rollout = torch.stack(steps, dim=1)  # E x T
+    states = torch.cat([rollout["com_state"], rollout["next", "com_state"][:, -1:]], 1)
+    result = task.evaluate(states, episodes)
+    paths = contacts = None
+    if env.record:
+        paths = rollout["next", "com_path"].flatten(1, 2).numpy()
+        contacts = rollout["next", "foot_contacts"].flatten(1, 2).numpy()
+    fell = rollout["next", "terminated"].squeeze(-1).any(1).numpy()
+    actions = rollout["action"].reshape(count, task.num_steps, -1).float().numpy()
+    return TaskRollout(result, actions, paths, contacts, fell, plan_time / task.num_steps)
