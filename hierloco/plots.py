@@ -67,3 +67,83 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     padded = np.concatenate([[False], mask, [False]]).astype(np.int8)
     edges = np.flatnonzero(np.diff(padded))
     return [(int(s), int(e - s)) for s, e in zip(edges[::2], edges[1::2])]
+
+
+def plot_task_paths(task, com_paths: np.ndarray, path: str | os.PathLike, *, title: str | None = None,
+                    episodes: Sequence[int] | None = None) -> None:
+    """CoM XY paths (``E x T x >=2``, world frame, m) of a task's episodes against its goals or reference path."""
+    from hierloco.envs.tasks import GoalReaching, TrajectoryTracking
+
+    paths = np.asarray(com_paths)
+    episodes = list(range(len(paths))) if episodes is None else list(episodes)
+    fig, ax = plt.subplots(figsize=(6, 6))
+    colors = plt.cm.viridis(np.linspace(0, 0.9, max(1, len(paths))))
+    for i, (xy, color) in enumerate(zip(paths, colors)):
+        ax.plot(xy[:, 0], xy[:, 1], color=color, lw=1.2, label=None if len(paths) > 1 else "CoM")
+        if isinstance(task, GoalReaching):
+            goal = task.goals[episodes[i]].numpy()
+            ax.scatter(*goal, marker="*", s=140, color=color, edgecolor="k", zorder=3)
+            ax.add_patch(plt.Circle(goal, 0.2, fill=False, ls=":", color=color))
+    if isinstance(task, TrajectoryTracking):
+        ref = task.path.numpy()
+        ax.plot(ref[:, 0], ref[:, 1], "k--", lw=1.0, label="reference")
+        ax.legend(loc="best")
+    ax.scatter([0], [0], marker="o", color="k", zorder=4)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.grid(alpha=0.3)
+    ax.set_title(title or task.name.replace("_", " "))
+    save_figure(fig, path)
+
+
+def plot_velocity_tracking(task, com_paths: np.ndarray, path: str | os.PathLike, *, dt: float = CONTROL_TIMESTEP,
+                           title: str | None = None) -> None:
+    """World-frame CoM velocity over each task step against the velocity targets, for one episode (``T x >=2``)."""
+    xy = np.asarray(com_paths)[:, :2]
+    steps_per_task_step = int(round(task.step_duration / dt))
+    ends = xy[steps_per_task_step - 1::steps_per_task_step]
+    starts = np.concatenate([[np.zeros(2)], ends[:-1]])
+    velocity = (ends - starts) / task.step_duration
+    import torch
+
+    targets = task.target(torch.zeros(len(ends), dtype=torch.long), torch.arange(len(ends))).numpy()
+    fig, axes = plt.subplots(2, 1, figsize=(8, 4.5), sharex=True)
+    for k, (ax, name) in enumerate(zip(axes, ("vx", "vy"))):
+        t = np.arange(1, len(ends) + 1) * task.step_duration
+        ax.step(t, targets[:, k], where="pre", color="k", ls="--", label="target")
+        ax.plot(t, velocity[:, k], "o-", ms=3, label="achieved")
+        ax.set_ylabel(f"{name} (m/s)")
+        ax.grid(alpha=0.3)
+    axes[0].legend(loc="upper right")
+    axes[1].set_xlabel("time (s)")
+    axes[0].set_title(title or "velocity tracking")
+    save_figure(fig, path)
+
+
+def plot_latent_map(latents: np.ndarray, com_paths: np.ndarray, path: str | os.PathLike, *,
+                    title: str | None = None) -> None:
+    """CoM XY paths (``G x T x >=2``) of a grid of 2-D latents (``G x 2``), coloured by position in the grid:
+    the paper's latent-space figure."""
+    z = np.asarray(latents)
+    paths = np.asarray(com_paths)
+    span = np.ptp(z, 0)
+    span[span == 0] = 1.0
+    unit = (z - z.min(0)) / span
+    colors = np.stack([unit[:, 0], 0.3 * np.ones(len(z)), unit[:, 1]], -1)
+    fig, (ax_z, ax_xy) = plt.subplots(1, 2, figsize=(11, 5))
+    ax_z.scatter(z[:, 0], z[:, 1], c=colors, s=40)
+    ax_z.set_xlabel("z1")
+    ax_z.set_ylabel("z2")
+    ax_z.set_title("latents")
+    for xy, color in zip(paths, colors):
+        ax_xy.plot(xy[:, 0], xy[:, 1], color=color, lw=1.0)
+        ax_xy.scatter(xy[-1, 0], xy[-1, 1], color=color, s=10)
+    ax_xy.scatter([0], [0], marker="o", color="k", zorder=3)
+    ax_xy.set_aspect("equal")
+    ax_xy.set_xlabel("x (m)")
+    ax_xy.set_ylabel("y (m)")
+    ax_xy.grid(alpha=0.3)
+    ax_xy.set_title("CoM paths")
+    fig.suptitle(title or "CoM paths over a grid of latent actions")
+    save_figure(fig, path)

@@ -19,6 +19,7 @@ import numpy as np
 import torch
 from torchrl.envs import TransformedEnv
 from torchrl.envs.utils import step_mdp
+from tqdm.auto import tqdm
 
 from hierloco.envs.latent_env import LatentActionEnv
 from hierloco.envs.tasks import Task, TaskResult
@@ -46,7 +47,7 @@ class TaskRollout:
     plan_seconds: float
 
 
-def run_task(env: LatentActionEnv, planner, task: Task, episodes=None) -> TaskRollout:
+def run_task(env: LatentActionEnv, planner, task: Task, episodes=None, progress: bool = False) -> TaskRollout:
     """Runs every episode of ``task`` with MPC (``planner``) on ``env``'s robots; ``planner.env`` is re-targeted
     to ``task``. ``env`` needs one robot per episode (``episodes``: which episode each robot runs)."""
     count = env.batch_size[0]
@@ -58,7 +59,7 @@ def run_task(env: LatentActionEnv, planner, task: Task, episodes=None) -> TaskRo
     task_env = TransformedEnv(env, TaskTransform(task, episodes))
     td = task_env.reset()
     steps, plan_time = [], 0.0
-    for _ in range(task.num_steps):
+    for _ in tqdm(range(task.num_steps), desc=task.name, disable=not progress, leave=False):
         start = time.perf_counter()
         td = planner(td)
         plan_time += time.perf_counter() - start
@@ -75,3 +76,18 @@ def run_task(env: LatentActionEnv, planner, task: Task, episodes=None) -> TaskRo
     fell = rollout["next", "terminated"].squeeze(-1).any(1).numpy()
     actions = rollout["action"].reshape(count, task.num_steps, -1).float().numpy()
     return TaskRollout(result, actions, paths, contacts, fell, plan_time / task.num_steps)
+
+
+def latent_grid_paths(low_level, *, grid: int = 7, num_actions: int = 3, seed: int = 0):
+    """Walks a ``grid x grid`` lattice of 2-D actions over the low level's box from standing, each held for
+    ``num_actions`` actions. Returns the latents ``G x 2`` and the CoM paths ``G x (num_actions * N) x 5``."""
+    if low_level.action_dim != 2:
+        raise ValueError(f"the latent map needs a 2-D action space, this one has {low_level.action_dim} dimensions")
+    axes = [np.linspace(lo, hi, grid) for lo, hi in zip(low_level.action_low, low_level.action_high)]
+    latents = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 2)
+    from hierloco.envs.batched_sim import BatchedSimulator
+
+    sim = BatchedSimulator(low_level.robot, len(latents), seed=seed)
+    paths = [low_level.run(sim, latents).com_state for _ in range(num_actions)]
+    sim.close()
+    return latents, np.concatenate(paths, 1)

@@ -115,5 +115,9 @@ class LatentActionEnv(EnvBase):
                            "done": terminated.clone(), "terminated": terminated,
                            "truncated": torch.zeros_like(terminated)}, batch_size=b, device=self.device)
 
+    def close(self, *, raise_if_closed: bool = True) -> None:
+        self.sim.close()
+        super().close(raise_if_closed=raise_if_closed)
+
     def _set_seed(self, seed: int | None) -> None:
         self.sim.seed(seed)
