@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # hierloco's two entry points. The first run creates .venv and installs the package with everything it needs.
-#   ./run.sh main [hydra overrides...]   the main job (LAT on a robot with a small preset)
+#   ./run.sh main [hydra overrides...]   the main job: LAT on A1 with the small preset (a few minutes)
 #   ./run.sh test [pytest args...]       the test suite
 #   ./run.sh bench                       the performance benchmarks
 set -euo pipefail
@@ -22,8 +22,9 @@ export WANDB_MODE=${WANDB_MODE:-offline}
 cmd=${1:-main}
 shift || true
 case "$cmd" in
-  main)  exec .venv/bin/python -m hierloco.demo "$@" ;;
+  main)  exec .venv/bin/python recipes/lat/train.py preset=small "$@" ;;
+  demo)  exec .venv/bin/python -m hierloco.demo "$@" ;;
   test)  exec .venv/bin/python -m pytest -q "$@" ;;
   bench) exec .venv/bin/python benchmarks/run_all.py "$@" ;;
-  *) echo "usage: ./run.sh {main|test|bench} [args...]" >&2; exit 2 ;;
+  *) echo "usage: ./run.sh {main|test|bench|demo} [args...]" >&2; exit 2 ;;
 esac

@@ -22,6 +22,7 @@ from torchrl.envs.utils import step_mdp
 from tqdm.auto import tqdm
 
 from hierloco.envs.latent_env import LatentActionEnv
+from hierloco.envs.robots import CONTROL_TIMESTEP
 from hierloco.envs.tasks import Task, TaskResult
 from hierloco.envs.transforms import TaskTransform
 
@@ -91,3 +92,49 @@ def latent_grid_paths(low_level, *, grid: int = 7, num_actions: int = 3, seed: i
     paths = [low_level.run(sim, latents).com_state for _ in range(num_actions)]
     sim.close()
     return latents, np.concatenate(paths, 1)
+
+
+def check_gait_policy(low_level, library, latents: np.ndarray, *, num_pairs: int = 50, num_actions: int = 4,
+                      seed: int = 0) -> dict:
+    """How well ``pi(., z)`` reproduces and interpolates the experts, in simulation (SPEC 5.2).
+
+    Runs ``pi(., z_g)`` open loop for every expert latent, and ``pi(., (z_a + z_b) / 2)`` for ``num_pairs`` random
+    pairs, each for ``num_actions`` actions from standing, and measures the mean CoM velocity over the last
+    ``num_actions - 1`` actions (in each action's start frame). Returns:
+
+    - ``reproduction_error``: ``G`` velocity errors (m/s) against each expert's recorded velocity, and
+      ``reproduced_fraction``: the fraction within 0.05 m/s;
+    - ``interpolation_walks``: the fraction of midpoints that walk without falling, and
+      ``interpolation_between``: the fraction that also move between the two experts (within 0.05 m/s of the
+      segment joining their velocities).
+    """
+    from hierloco.components.expert_library import action_motion
+    from hierloco.envs.batched_sim import BatchedSimulator
+
+    rng = np.random.default_rng(seed)
+    latents = np.asarray(latents, dtype=np.float64)
+    pairs = np.array([rng.choice(len(latents), 2, replace=False) for _ in range(num_pairs)])
+    queries = np.concatenate([latents, 0.5 * (latents[pairs[:, 0]] + latents[pairs[:, 1]])])
+    sim = BatchedSimulator(low_level.robot, len(queries), seed=seed)
+    n = low_level.steps_per_action
+    results = [low_level.run(sim, queries) for _ in range(num_actions)]
+    sim.close()
+    fell = np.any([r.failed[:, -1] for r in results], axis=0)
+    duration = n * CONTROL_TIMESTEP
+    velocities = []
+    for previous, current in zip(results[:-1], results[1:]):
+        states = np.concatenate([previous.com_state[:, -1:], current.com_state], 1)
+        velocities.append(action_motion(states, duration)[1])
+    velocity = np.mean(velocities, 0)
+    g = len(latents)
+    error = np.linalg.norm(velocity[:g] - library.velocity_local, axis=-1)
+    error[fell[:g]] = np.inf
+    a, b = library.velocity_local[pairs[:, 0]], library.velocity_local[pairs[:, 1]]
+    mid = velocity[g:]
+    t = np.clip(np.sum((mid - a) * (b - a), -1) / np.maximum(np.sum((b - a) ** 2, -1), 1e-12), 0, 1)
+    to_segment = np.linalg.norm(mid - (a + t[:, None] * (b - a)), axis=-1)
+    walks = ~fell[g:]
+    return {"reproduction_error": error.tolist(), "reproduced_fraction": float(np.mean(error <= 0.05)),
+            "interpolation_walks": float(walks.mean()),
+            "interpolation_between": float(np.mean(walks & (to_segment <= 0.05))),
+            "interpolation_distance_to_segment": to_segment.tolist()}

@@ -9,7 +9,6 @@ Each stage is cached in the run directory with its config and reused when the co
 
 from __future__ import annotations
 
-import json
 import sys
 import time
 from pathlib import Path
@@ -36,8 +35,12 @@ def main(cfg: DictConfig) -> None:
     library = utils.stage_experts(cfg, run)
     trained = utils.stage_gait_policy(cfg, run, library)
     low_level = utils.make_low_level(cfg, trained)
-    reports = {"gait_policy": trained.metadata, "experts": library.metadata}
-    logger.log_metrics({"train/gait_policy/rmse": trained.metadata["rmse"]})
+    check = utils.stage_gait_policy_check(cfg, run, low_level, library, trained)
+    reports = {"experts": library.metadata, "gait_policy": trained.metadata, "gait_policy_check": check}
+    logger.log_metrics({"train/gait_policy/rmse": trained.metadata["rmse"],
+                        "eval/gait_policy/reproduced_fraction": check["reproduced_fraction"],
+                        "eval/gait_policy/interpolation_walks": check["interpolation_walks"],
+                        "eval/gait_policy/interpolation_between": check["interpolation_between"]})
 
     episodes = []
     for setting in cfg.settings:
@@ -51,8 +54,7 @@ def main(cfg: DictConfig) -> None:
                        "eval": utils._section(cfg, "eval")}
         episodes += run.stage(f"evaluation_{setting}", eval_config,
                               lambda: utils.evaluate(cfg, run, low_level, model, setting, logger),
-                              lambda rows, path: path.write_text(json.dumps(rows)),
-                              lambda path: json.loads(path.read_text()), f"evaluation_{setting}.json")
+                              utils._save_json, utils._load_json, f"evaluation_{setting}.json")
     utils.latent_map(cfg, run, low_level)
 
     reports["stage_seconds"] = run.timings

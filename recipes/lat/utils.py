@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -11,7 +12,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from hierloco.components.com_model import TrainedCoMModel, train_com_model
 from hierloco.components.dynamics_data import TransitionData, collect_transitions
-from hierloco.components.evaluation import latent_grid_paths, run_task
+from hierloco.components.evaluation import check_gait_policy, latent_grid_paths, run_task
 from hierloco.components.expert_library import ExpertLibrary, build_expert_library
 from hierloco.components.gait_policy import TrainedGaitPolicy, train_gait_policy
 from hierloco.components.low_level import LatentLowLevel
@@ -119,6 +120,22 @@ def stage_gait_policy(cfg, run: RunDirectory, library: ExpertLibrary) -> Trained
                      "gait_policy.pt")
 
 
+def _save_json(obj, path: Path) -> None:
+    write_text(path, json.dumps(obj))
+
+
+def _load_json(path: Path):
+    return json.loads(path.read_text())
+
+
+def stage_gait_policy_check(cfg, run: RunDirectory, low_level, library: ExpertLibrary,
+                            trained: TrainedGaitPolicy) -> dict:
+    """Reproduction of the experts and interpolation between them by ``pi(., z)``, in simulation."""
+    return run.stage("gait_policy_check", policy_config(cfg),
+                     lambda: check_gait_policy(low_level, library, trained.latents.numpy(), seed=cfg.seed),
+                     _save_json, _load_json, "gait_policy_check.json")
+
+
 def make_low_level(cfg, trained: TrainedGaitPolicy) -> LatentLowLevel:
     return LatentLowLevel(trained, cfg.robot, device=cfg.device)
 
@@ -223,6 +240,4 @@ def latent_map(cfg, run: RunDirectory, low_level) -> Path | None:
 
 def stage_report(run: RunDirectory, reports: dict) -> None:
     """Writes the stages' training reports (held-out errors, reconstruction RMSE, timings) as ``report.json``."""
-    import json
-
     write_text(run.path / "report.json", json.dumps(reports, indent=2, default=float))
