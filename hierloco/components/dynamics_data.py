@@ -109,6 +109,9 @@ def collect_transitions(env: LatentActionEnv, num_transitions: int, *, episode_l
             bar.update(take)
             if kept >= num_transitions:
                 break
+            if dropped > 10 * int(num_transitions) + 10 * num_robots:
+                raise RuntimeError(f"{env.robot.name}: {dropped} of {kept + dropped} random actions ended in a fall "
+                                   f"or a blow-up; the low level cannot produce usable dynamics data")
     finally:
         collector.shutdown()
         bar.close()

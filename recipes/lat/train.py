@@ -15,11 +15,12 @@ from pathlib import Path
 
 import hydra
 import torch
-from omegaconf import DictConfig
+from omegaconf import DictConfig, OmegaConf
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import utils  # noqa: E402  (the recipe's factories, beside this file)
 
+from hierloco.io import write_text  # noqa: E402
 from hierloco.results import write_results  # noqa: E402
 from hierloco.runs import RunDirectory  # noqa: E402
 
@@ -64,6 +65,7 @@ def main(cfg: DictConfig) -> None:
     for stage, seconds in run.timings.items():
         logger.log_scalar(f"time/{stage}", seconds)
     table = write_results(run.path, episodes)
+    write_text(run.path / "config.yaml", OmegaConf.to_yaml(cfg, resolve=True))
     logger.close()
     print(f"\nLAT on {cfg.robot} (seed {cfg.seed}), run directory {run.path}\n")
     print(table)
