@@ -25,6 +25,8 @@ import time
 from pathlib import Path
 from typing import Any, Callable, TypeVar
 
+import numpy as np
+
 from hierloco.io import ArtifactError, write_text
 
 T = TypeVar("T")
@@ -32,6 +34,17 @@ T = TypeVar("T")
 
 class ConfigMismatchError(ArtifactError):
     """A stage's artifact on disk was made with another config."""
+
+
+def _json_default(value):
+    if isinstance(value, (np.generic, np.ndarray)):
+        return value.tolist()
+    return str(value)
+
+
+def _normalized(config: dict) -> dict:
+    """The config as it is stored: tuples as lists, numpy scalars and arrays as numbers and lists, others as str."""
+    return json.loads(json.dumps(config, default=_json_default))
 
 
 def _diff(stored: dict, wanted: dict, prefix: str = "") -> list[str]:
@@ -67,9 +80,11 @@ class RunDirectory:
                                       "made it; use another run directory or remove the file")
         try:
             stored = json.loads(config_path.read_text())
-        except json.JSONDecodeError as error:
+        except (json.JSONDecodeError, UnicodeDecodeError) as error:
             raise ArtifactError(f"corrupted stage config {config_path}: {error}") from error
-        wanted = json.loads(json.dumps(config))  # normalise tuples, numpy scalars...
+        if not isinstance(stored, dict):
+            raise ArtifactError(f"corrupted stage config {config_path}: not a JSON object")
+        wanted = _normalized(config)
         if stored != wanted:
             raise ConfigMismatchError(f"stage {name!r} in {self.path} was made with another config:\n  "
                                       + "\n  ".join(_diff(stored, wanted))
@@ -85,7 +100,7 @@ class RunDirectory:
             result = load(artifact)
             self.reused[name] = True
         else:
-            write_text(self.config_path(name), json.dumps(config, indent=2, sort_keys=True, default=str))
+            write_text(self.config_path(name), json.dumps(_normalized(config), indent=2, sort_keys=True))
             result = build()
             save(result, artifact)
             self.reused[name] = False

@@ -101,10 +101,15 @@ class Task:
         ``episodes`` (``E``) says which episode each row is (default ``0..E-1``). Returns per-episode results.
         """
         states = _as_tensor(com_states).double()
+        if states.ndim != 3 or states.shape[-1] != 5:
+            raise ValueError(f"{self.name}: com_states must be E x (T + 1) x 5, got shape {tuple(states.shape)}")
         num, steps_plus_one, _ = states.shape
         if steps_plus_one - 1 != self.num_steps:
             raise ValueError(f"{self.name}: expected {self.num_steps + 1} states per episode, got {steps_plus_one}")
-        episodes = torch.arange(num) if episodes is None else _as_tensor(episodes).long()
+        episodes = torch.arange(num) if episodes is None else _as_tensor(episodes).long().reshape(-1)
+        if episodes.shape != (num,) or bool(((episodes < 0) | (episodes >= self.num_episodes)).any()):
+            raise ValueError(f"{self.name}: episodes must be {num} indices in [0, {self.num_episodes}), "
+                             f"got {episodes.tolist()}")
         steps = torch.arange(self.num_steps)[None, :].expand(num, -1)
         costs = self.cost(states[:, :-1], states[:, 1:], episodes[:, None], steps)
         standing = self.standing_costs().double()[episodes]
@@ -148,6 +153,8 @@ class VelocityTracking(Task):
         self.velocities = torch.as_tensor(np.asarray(velocities, dtype=np.float32))
         if self.velocities.ndim != 2 or self.velocities.shape[1] != 2 or not len(self.velocities):
             raise ValueError(f"velocities must be a list of (vx, vy) pairs, got {velocities}")
+        if not torch.isfinite(self.velocities).all():
+            raise ValueError(f"velocities must be finite m/s, got {velocities}")
         if steps_per_target < 1 or rounds < 1:
             raise ValueError("steps_per_target and rounds must be positive")
         self.steps_per_target = int(steps_per_target)
@@ -173,13 +180,15 @@ class GoalReaching(Task):
     def __init__(self, radius: float = 2.0, num_goals: int = 8, num_steps: int = 30, angle_offset: float = 0.0,
                  goals: Sequence[Sequence[float]] | None = None):
         if goals is None:
-            if not radius > 0 or num_goals < 1:
+            if not (math.isfinite(radius) and radius > 0) or num_goals < 1:
                 raise ValueError(f"need radius > 0 and num_goals >= 1, got {radius}, {num_goals}")
             angles = angle_offset + 2 * math.pi * torch.arange(num_goals) / num_goals
             goals = torch.stack([radius * torch.cos(angles), radius * torch.sin(angles)], -1)
         self.goals = torch.as_tensor(np.asarray(goals, dtype=np.float32))
         if self.goals.ndim != 2 or self.goals.shape[1] != 2:
             raise ValueError(f"goals must be a list of (x, y) positions, got {goals}")
+        if not torch.isfinite(self.goals).all():
+            raise ValueError(f"goals must be finite positions (m), got {goals}")
         if num_steps < 1:
             raise ValueError("num_steps must be positive")
         self.num_episodes = len(self.goals)
@@ -214,8 +223,12 @@ class TrajectoryTracking(Task):
         points = s_path() if path is None else np.asarray(path, dtype=np.float64)
         if points.ndim != 2 or points.shape[1] != 2 or len(points) < 2:
             raise ValueError("path must be a P x 2 array of points, P >= 2")
-        if not speed > 0:
+        if not np.isfinite(points).all() or not np.linalg.norm(np.diff(points, axis=0), axis=1).sum() > 0:
+            raise ValueError("path must be finite points (m) with a positive length")
+        if not (math.isfinite(speed) and speed > 0):
             raise ValueError(f"speed must be positive m/s, got {speed}")
+        if int(extra_steps) < 0:
+            raise ValueError(f"extra_steps must be >= 0, got {extra_steps}")
         self.path = torch.as_tensor(points, dtype=torch.float32)
         self.arc_length = torch.as_tensor(np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0),
                                                                                           axis=1))]),

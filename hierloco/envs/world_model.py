@@ -77,8 +77,12 @@ class CoMWorldModelEnv(ModelBasedEnvBase):
             device=self.device,
         )
         if num_choices is not None:
+            if int(num_choices) < 1:
+                raise ValueError(f"num_choices must be at least 1, got {num_choices}")
             self.action_spec = Categorical(int(num_choices), (1,), dtype=torch.int64, device=self.device)
         else:
+            if action_low is None or action_high is None:
+                raise ValueError("give the action box (action_low and action_high) or num_choices")
             low = torch.as_tensor(action_low, dtype=torch.float32)
             high = torch.as_tensor(action_high, dtype=torch.float32)
             if low.shape != high.shape or low.ndim != 1 or not torch.all(low <= high):

@@ -1,0 +1,148 @@
+"""Run directories: stages cached with their config, mismatches refused, failures leave nothing behind (SPEC 9)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from hierloco.io import ArtifactError
+from hierloco.runs import ConfigMismatchError, RunDirectory
+
+CONFIG = {"robot": "a1", "experts": {"num": 3, "seed": 0}, "lr": 1e-3, "dims": (2, 3)}
+
+
+class Stage:
+    """A stage whose build, save and load calls are counted."""
+
+    def __init__(self, value=(1, 2, 3)):
+        self.value = list(value)
+        self.builds = self.loads = 0
+
+    def build(self):
+        self.builds += 1
+        return list(self.value)
+
+    @staticmethod
+    def save(obj, path):
+        path.write_text(json.dumps(obj))
+
+    def load(self, path):
+        self.loads += 1
+        return json.loads(path.read_text())
+
+    def run(self, run, config=CONFIG, name="numbers", filename="numbers.json"):
+        return run.stage(name, config, self.build, self.save, self.load, filename)
+
+
+def snapshot(directory):
+    return {p.name: p.read_bytes() for p in sorted(directory.iterdir())}
+
+
+def test_built_once_then_loaded(tmp_path):
+    stage = Stage()
+    run = RunDirectory(tmp_path)
+    assert stage.run(run) == [1, 2, 3]
+    assert (stage.builds, stage.loads) == (1, 0)
+    assert run.reused == {"numbers": False} and run.timings["numbers"] >= 0
+    assert json.loads((tmp_path / "numbers.config.json").read_text()) == json.loads(json.dumps(CONFIG))
+    # same directory object, then a fresh one (a re-run)
+    assert stage.run(run) == [1, 2, 3]
+    rerun = RunDirectory(tmp_path)
+    assert stage.run(rerun) == [1, 2, 3]
+    assert (stage.builds, stage.loads) == (1, 2)
+    assert rerun.reused == {"numbers": True} and "numbers" in rerun.timings
+
+
+def test_other_stages_are_independent(tmp_path):
+    run = RunDirectory(tmp_path)
+    first, second = Stage([1]), Stage([2])
+    first.run(run, name="a", filename="a.json")
+    second.run(run, {"other": 1}, name="b", filename="b.json")
+    assert run.reused == {"a": False, "b": False}
+    assert first.run(RunDirectory(tmp_path), name="a", filename="a.json") == [1]
+    assert first.builds == 1
+
+
+@pytest.mark.parametrize("change, key", [
+    ({"lr": 2e-3}, "lr"),
+    ({"experts": {"num": 5, "seed": 0}}, "experts.num"),
+    ({"extra": True}, "extra"),
+])
+def test_config_mismatch(tmp_path, change, key):
+    stage = Stage()
+    stage.run(RunDirectory(tmp_path))
+    before = snapshot(tmp_path)
+    other = Stage([9, 9])
+    with pytest.raises(ConfigMismatchError, match=key) as info:
+        other.run(RunDirectory(tmp_path), {**CONFIG, **change})
+    assert "numbers" in str(info.value)
+    assert other.builds == 0 and other.loads == 0
+    assert snapshot(tmp_path) == before  # artifact and config file byte-identical
+
+
+def test_missing_key_is_named(tmp_path):
+    Stage().run(RunDirectory(tmp_path))
+    config = {k: v for k, v in CONFIG.items() if k != "lr"}
+    with pytest.raises(ConfigMismatchError, match="lr"):
+        Stage().run(RunDirectory(tmp_path), config)
+
+
+def test_tuples_and_numpy_scalars_match_their_json_form(tmp_path):
+    config = {**CONFIG, "num": np.int64(3), "scale": np.float32(0.5), "shape": np.array([2, 3])}
+    stage = Stage()
+    stage.run(RunDirectory(tmp_path), config)
+    stored = json.loads((tmp_path / "numbers.config.json").read_text())
+    assert stored["num"] == 3 and stored["scale"] == 0.5 and stored["shape"] == [2, 3] and stored["dims"] == [2, 3]
+    assert stage.run(RunDirectory(tmp_path), config) == [1, 2, 3]  # the re-run reuses it
+    assert stage.run(RunDirectory(tmp_path), {**config, "num": 3, "dims": [2, 3]}) == [1, 2, 3]
+    assert stage.builds == 1
+    with pytest.raises(ConfigMismatchError, match="num"):
+        stage.run(RunDirectory(tmp_path), {**config, "num": np.int64(4)})
+
+
+def test_artifact_without_config_raises(tmp_path):
+    (tmp_path / "numbers.json").write_text("[1]")
+    stage = Stage()
+    with pytest.raises(ConfigMismatchError, match="numbers.config.json"):
+        stage.run(RunDirectory(tmp_path))
+    assert stage.builds == 0
+    assert (tmp_path / "numbers.json").read_text() == "[1]"
+    assert not (tmp_path / "numbers.config.json").exists()
+
+
+@pytest.mark.parametrize("content", [b'{"robot": "a1", ', b"\xff\xfe\x00garbage", b"[1, 2]", b"3"])
+def test_corrupted_config_raises(tmp_path, content):
+    Stage().run(RunDirectory(tmp_path))
+    (tmp_path / "numbers.config.json").write_bytes(content)
+    before = snapshot(tmp_path)
+    stage = Stage()
+    with pytest.raises(ArtifactError, match="numbers.config.json"):
+        stage.run(RunDirectory(tmp_path))
+    assert stage.builds == 0
+    assert snapshot(tmp_path) == before
+
+
+def test_failed_build_leaves_no_artifact(tmp_path):
+    run = RunDirectory(tmp_path)
+
+    def broken():
+        raise RuntimeError("killed")
+
+    with pytest.raises(RuntimeError, match="killed"):
+        run.stage("numbers", CONFIG, broken, Stage.save, Stage().load, "numbers.json")
+    assert not (tmp_path / "numbers.json").exists()
+    assert "numbers" not in run.reused
+    stage = Stage()
+    assert stage.run(RunDirectory(tmp_path)) == [1, 2, 3]  # the re-run builds it
+    assert stage.builds == 1
+    # and a re-run after a failed build with another config builds too (nothing finished to protect)
+    with pytest.raises(RuntimeError):
+        run.stage("other", {"a": 1}, broken, Stage.save, Stage().load, "other.json")
+    other = Stage([4])
+    assert other.run(RunDirectory(tmp_path), {"a": 2}, name="other", filename="other.json") == [4]
+    assert json.loads((tmp_path / "other.config.json").read_text()) == {"a": 2}
+
+
+def test_config_mismatch_is_an_artifact_error():
+    assert issubclass(ConfigMismatchError, ArtifactError)
+    assert issubclass(ArtifactError, ValueError)
