@@ -1,14 +1,14 @@
 """Results tables shared by every recipe: ``results.csv``, ``episodes.csv`` and ``results.md``.
 
 ``results.csv`` has one row per (method, robot, setting, task, seed) with the columns of :data:`RESULT_COLUMNS`,
-the mean over the task's episodes (targets). ``episodes.csv`` keeps the per-episode numbers, from which
-``results.md`` reports mean +- std over targets and seeds.
+the mean over the task's episodes (targets). ``episodes.csv`` keeps the per-episode numbers (and, for trajectory tracking, the mean distance
+from the CoM to the path in m), from which ``results.md`` reports mean +- std over targets and seeds.
 
 Example:
     >>> rows = [dict(method="lat", robot="a1", setting="normal", task="goal_reaching", seed=0, episode=e,
     ...              normalized_cost=c, success=1.0, final_error=0.1) for e, c in enumerate([0.3, 0.5])]
     >>> print(markdown_table(rows).splitlines()[2])
-    | lat | a1 | normal | goal_reaching | 0.40 +- 0.10 | 100% | 0.10 +- 0.00 | 1 |
+    | lat | a1 | normal | goal_reaching | 0.40 +- 0.10 | 100% | 0.10 +- 0.00 | 1 | - |
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from hierloco.io import write_text
 
 RESULT_COLUMNS = ["method", "robot", "setting", "task", "seed", "normalized_cost", "success_rate", "final_error"]
 EPISODE_COLUMNS = ["method", "robot", "setting", "task", "seed", "episode", "normalized_cost", "success",
-                   "final_error"]
+                   "final_error", "path_distance"]
 GROUP = ("method", "robot", "setting", "task")
 
 
@@ -57,8 +57,8 @@ def markdown_table(rows: Iterable[Mapping]) -> str:
     groups = defaultdict(list)
     for row in rows:
         groups[tuple(row[k] for k in GROUP)].append(row)
-    lines = ["| method | robot | setting | task | normalized cost | success | final error | seeds |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = ["| method | robot | setting | task | normalized cost | success | final error | seeds | path distance |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for key in sorted(groups):
         members = groups[key]
         cost = np.array([m["normalized_cost"] for m in members])
@@ -66,9 +66,18 @@ def markdown_table(rows: Iterable[Mapping]) -> str:
         error = np.array([m["final_error"] for m in members])
         seeds = len({m["seed"] for m in members})
         success_text = "-" if np.all(np.isnan(success)) else f"{100 * np.nanmean(success):.0f}%"
+        distance = np.array([m["path_distance"] for m in members if _number(m.get("path_distance"))], dtype=float)
+        distance_text = f"{distance.mean():.2f} +- {distance.std():.2f}" if len(distance) else "-"
         lines.append(f"| {' | '.join(map(str, key))} | {cost.mean():.2f} +- {cost.std():.2f} | {success_text} | "
-                     f"{error.mean():.2f} +- {error.std():.2f} | {seeds} |")
+                     f"{error.mean():.2f} +- {error.std():.2f} | {seeds} | {distance_text} |")
     return "\n".join(lines) + "\n"
+
+
+def _number(value) -> bool:
+    try:
+        return value is not None and value != "" and not np.isnan(float(value))
+    except (TypeError, ValueError):
+        return False
 
 
 def _csv_text(rows: Iterable[Mapping], columns: list[str]) -> str:
@@ -87,8 +96,8 @@ def read_csv(path: str | os.PathLike) -> list[dict]:
         for key, value in row.items():
             if key in ("seed", "episode"):
                 row[key] = int(value)
-            elif key in ("normalized_cost", "success_rate", "success", "final_error"):
-                row[key] = float(value)
+            elif key in ("normalized_cost", "success_rate", "success", "final_error", "path_distance"):
+                row[key] = float(value) if value != "" else float("nan")
     return rows
 
 

@@ -9,7 +9,8 @@ stage.
 Example:
     >>> import json, tempfile
     >>> run = RunDirectory(tempfile.mkdtemp())
-    >>> save = lambda obj, path: path.write_text(json.dumps(obj))
+    >>> from hierloco.io import write_text
+    >>> save = lambda obj, path: write_text(path, json.dumps(obj))  # savers write atomically
     >>> load = lambda path: json.loads(path.read_text())
     >>> run.stage("numbers", {"n": 3}, lambda: list(range(3)), save, load, "numbers.json")
     [0, 1, 2]

@@ -66,7 +66,8 @@ def test_read_csv_round_trip(tmp_path):
     back = read_csv(tmp_path / "episodes.csv")
     assert len(back) == len(rows)
     for original, read in zip(rows, back):
-        assert set(read) == set(original)
+        assert set(read) == set(original) | {"path_distance"}
+        assert math.isnan(read["path_distance"])  # only trajectory tracking rows carry a path distance
         for key, value in original.items():
             if isinstance(value, float) and math.isnan(value):
                 assert math.isnan(read[key])
@@ -103,6 +104,15 @@ def test_markdown_mean_and_std_over_targets_and_seeds(tmp_path):
     lines = table.splitlines()
     assert lines[0].startswith("| method | robot | setting | task | normalized cost | success | final error")
     assert len(lines) == 2 + 3
+    assert all(line.endswith("| - |") for line in lines[2:])  # no path distances in these rows
+
+
+def test_path_distance_column(tmp_path):
+    rows = [dict(method="lat", robot="a1", setting="normal", task="trajectory_tracking", seed=s, episode=0,
+                 normalized_cost=0.1, success=1.0, final_error=0.05, path_distance=d) for s, d in ((0, 0.02), (1, 0.04))]
+    table = write_results(tmp_path, rows)
+    assert _line(table, "lat", "normal", "trajectory_tracking")[8] == "0.03 +- 0.01"
+    assert [r["path_distance"] for r in read_csv(tmp_path / "episodes.csv")] == [0.02, 0.04]
 
 
 def test_markdown_ignores_missing_success_of_some_episodes():

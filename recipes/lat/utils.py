@@ -201,7 +201,7 @@ def evaluate(cfg, run: RunDirectory, low_level, model: TrainedCoMModel, setting:
                               record=True, seed=cfg.seed)
         rollout = run_task(env, planner, task, progress=cfg.progress)
         env.close()
-        rows += episode_rows(rollout, method=METHOD, robot=cfg.robot, setting=setting, seed=cfg.seed)
+        new_rows = episode_rows(rollout, method=METHOD, robot=cfg.robot, setting=setting, seed=cfg.seed)
         result = rollout.result
         metrics = {f"eval/{setting}/{name}/normalized_cost": float(np.mean(result.normalized_cost)),
                    f"eval/{setting}/{name}/final_error": float(np.mean(result.final_error)),
@@ -210,8 +210,11 @@ def evaluate(cfg, run: RunDirectory, low_level, model: TrainedCoMModel, setting:
         if task.has_success:
             metrics[f"eval/{setting}/{name}/success_rate"] = float(np.mean(result.success))
         if hasattr(task, "path_distance"):
-            distance = task.path_distance(rollout.com_paths[..., :2]).mean()
-            metrics[f"eval/{setting}/{name}/path_distance"] = float(distance)
+            distance = task.path_distance(rollout.com_paths[..., :2]).mean(1)  # per episode, over 100 Hz samples
+            for row, value in zip(new_rows, distance):
+                row["path_distance"] = float(value)
+            metrics[f"eval/{setting}/{name}/path_distance"] = float(distance.mean())
+        rows += new_rows
         logger.log_metrics(metrics)
         if cfg.eval.figures:
             title = f"LAT {cfg.robot} ({setting}): {name}"
