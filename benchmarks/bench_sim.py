@@ -29,7 +29,8 @@ from mujoco import rollout as mj_rollout
 
 from hierloco.envs import get_robot, make_env
 from hierloco.envs.batched_sim import STATE_SPEC, BatchedSimulator
-from hierloco.envs.robots import CONTROL_TIMESTEP, PHYSICS_STEPS_PER_CONTROL, RobotSpec
+from hierloco.envs.robots import PHYSICS_STEPS_PER_CONTROL, RobotSpec
+from hierloco.envs.scripted_gait import sinusoidal_gait
 
 NATIVE_RATIO_TARGET = 0.7  # batched / native
 TORCHRL_RATIO_TARGET = 10.0  # batched / naive TorchRL loop
@@ -55,26 +56,6 @@ class ThroughputRow:
         return self.batched / self.torchrl
 
 
-def walking_targets(robot: RobotSpec, num_robots: int, num_steps: int, amplitude: float = 0.15,
-                    frequency: float = 2.0, seed: int = 0) -> np.ndarray:
-    """``B x T x J`` walking-like joint targets in rad: the standing pose plus a sinusoid per joint at
-    ``frequency`` (Hz), the legs of a gait group in phase, the groups evenly staggered, each copy with its own
-    phase and amplitude. Gentle enough that the robots keep walking (no falls, no resets in the TorchRL loop)."""
-    rng = np.random.default_rng(seed)
-    t = np.arange(num_steps)[None, :] * CONTROL_TIMESTEP
-    start = rng.uniform(0, 2 * np.pi, (num_robots, 1))
-    scale = amplitude * rng.uniform(0.7, 1.0, (num_robots, 1))
-    group_of = {leg: i for i, group in enumerate(robot.gait_groups) for leg in group}
-    targets = np.tile(np.asarray(robot.standing_pose, dtype=np.float64), (num_robots, num_steps, 1))
-    joint = 0
-    for leg in robot.legs:
-        leg_phase = 2 * np.pi * group_of[leg.name] / len(robot.gait_groups)
-        for k in range(len(leg.joints)):
-            targets[..., joint] += scale * np.sin(2 * np.pi * frequency * t + start + leg_phase + k * np.pi / 2)
-            joint += 1
-    return targets
-
-
 def _interleaved_best_rates(workloads: dict, repeats: int) -> dict[str, float]:
     """Physics steps per second of each workload, the fastest of ``repeats`` calls after one warm-up call.
 
@@ -97,7 +78,7 @@ def _batched_and_native_workloads(robot: RobotSpec, num_robots: int, control_ste
     """The batched-simulator and bare-rollout calls on the same model, initial states, controls and threads."""
     sim = BatchedSimulator(robot, num_robots, init_joint_noise=0.05, seed=0, nthread=nthread)
     initial = sim.state.copy()
-    targets = walking_targets(robot, num_robots, control_steps)
+    targets = sinusoidal_gait(robot, num_robots, control_steps)
 
     def batched():
         sim.set_state(initial)
@@ -131,7 +112,7 @@ def _batched_and_native_workloads(robot: RobotSpec, num_robots: int, control_ste
 def _torchrl_workload(robot: RobotSpec, env_steps: int):
     """A Python loop of TorchRL env steps: ``make_env`` + ``env.rollout`` with a policy, one copy."""
     env = make_env(robot, seed=0, time_limit=1e6)
-    targets = torch.as_tensor(walking_targets(robot, 1, env_steps)[0], dtype=torch.float32)
+    targets = torch.as_tensor(sinusoidal_gait(robot, 1, env_steps)[0], dtype=torch.float32)
 
     def rollout():
         step = iter(range(env_steps))

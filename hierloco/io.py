@@ -77,3 +77,28 @@ def load_arrays(path: str | os.PathLike) -> tuple[dict[str, np.ndarray], dict[st
     except (OSError, ValueError, KeyError, zipfile.BadZipFile, json.JSONDecodeError, EOFError) as error:
         raise ArtifactError(f"corrupted artifact {path}: {error}") from error
     return arrays, metadata
+
+
+def save_checkpoint(path: str | os.PathLike, kind: str, version: int, payload: Mapping[str, Any]) -> None:
+    """Saves a torch checkpoint tagged with its ``kind`` and format ``version``, atomically."""
+    import torch
+
+    with atomic_path(path) as tmp:
+        torch.save({**payload, "kind": kind, "format": version}, tmp)
+
+
+def load_checkpoint(path: str | os.PathLike, kind: str, version: int, map_location="cpu") -> dict:
+    """Loads a checkpoint written by :func:`save_checkpoint` (weights only, no code); raises :class:`ArtifactError`
+    naming the file when it is missing, damaged, or of another kind or version."""
+    import torch
+
+    description = kind.replace("_", " ")
+    try:
+        payload = torch.load(path, map_location=map_location, weights_only=True)
+    except FileNotFoundError:
+        raise ArtifactError(f"no such {description} checkpoint: {path}") from None
+    except Exception as error:  # torch raises many types for a damaged file
+        raise ArtifactError(f"corrupted {description} checkpoint {path}: {error}") from error
+    if not isinstance(payload, dict) or payload.get("kind") != kind or payload.get("format") != version:
+        raise ArtifactError(f"{path} is not a {description} checkpoint of format {version}")
+    return payload

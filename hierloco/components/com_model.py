@@ -36,7 +36,7 @@ from torch import nn
 from tqdm.auto import tqdm
 
 from hierloco.envs.frames import local_to_world, world_to_local, wrap_angle
-from hierloco.io import ArtifactError, atomic_path
+from hierloco.io import ArtifactError, load_checkpoint, save_checkpoint
 
 CHECKPOINT_FORMAT = 1
 CHECKPOINT_KIND = "com_model"
@@ -192,23 +192,13 @@ class TrainedCoMModel:
 
     def save(self, path: str | os.PathLike) -> None:
         """Writes a checkpoint (config, weights and statistics, metadata) to ``path`` atomically."""
-        payload = {"format": CHECKPOINT_FORMAT, "kind": CHECKPOINT_KIND, "config": self.model.config(),
-                   "state_dict": self.model.state_dict(), "metadata": self.metadata}
-        with atomic_path(path) as tmp:
-            torch.save(payload, tmp)
+        save_checkpoint(path, CHECKPOINT_KIND, CHECKPOINT_FORMAT, {"config": self.model.config(),
+                        "state_dict": self.model.state_dict(), "metadata": self.metadata})
 
     @classmethod
     def load(cls, path: str | os.PathLike, map_location="cpu") -> "TrainedCoMModel":
         """Reads a checkpoint written by :meth:`save`; raises :class:`ArtifactError` naming the file if it is bad."""
-        try:
-            payload = torch.load(path, map_location=map_location, weights_only=True)
-        except FileNotFoundError:
-            raise ArtifactError(f"no such CoM model checkpoint: {path}") from None
-        except Exception as error:  # torch raises many types for a damaged file
-            raise ArtifactError(f"corrupted CoM model checkpoint {path}: {error}") from error
-        if not isinstance(payload, dict) or payload.get("kind") != CHECKPOINT_KIND \
-                or payload.get("format") != CHECKPOINT_FORMAT:
-            raise ArtifactError(f"{path} is not a CoM model checkpoint of format {CHECKPOINT_FORMAT}")
+        payload = load_checkpoint(path, CHECKPOINT_KIND, CHECKPOINT_FORMAT, map_location)
         try:
             model = CoMDynamicsModel(**payload["config"])
             model.load_state_dict(payload["state_dict"])

@@ -29,9 +29,10 @@ from tensordict.nn import TensorDictModule
 from torch import nn
 from tqdm.auto import tqdm
 
-from hierloco.io import ArtifactError, atomic_path
+from hierloco.io import load_checkpoint, save_checkpoint
 
 CHECKPOINT_FORMAT = 1
+CHECKPOINT_KIND = "gait_policy"
 
 
 class LatentGaitPolicy(nn.Module):
@@ -108,23 +109,13 @@ class TrainedGaitPolicy:
 
     def save(self, path: str | os.PathLike) -> None:
         """Writes a checkpoint (weights, config, latents, box, metadata) to ``path`` atomically."""
-        payload = {"format": CHECKPOINT_FORMAT, "kind": "gait_policy", "config": self.policy.config(),
-                   "state_dict": self.policy.state_dict(), "latents": self.latents, "latent_low": self.latent_low,
-                   "latent_high": self.latent_high, "metadata": self.metadata}
-        with atomic_path(path) as tmp:
-            torch.save(payload, tmp)
+        save_checkpoint(path, CHECKPOINT_KIND, CHECKPOINT_FORMAT, {
+            "config": self.policy.config(), "state_dict": self.policy.state_dict(), "latents": self.latents,
+            "latent_low": self.latent_low, "latent_high": self.latent_high, "metadata": self.metadata})
 
     @classmethod
     def load(cls, path: str | os.PathLike, map_location="cpu") -> "TrainedGaitPolicy":
-        try:
-            payload = torch.load(path, map_location=map_location, weights_only=True)
-        except FileNotFoundError:
-            raise ArtifactError(f"no such gait policy checkpoint: {path}") from None
-        except Exception as error:  # torch raises many types for a damaged file
-            raise ArtifactError(f"corrupted gait policy checkpoint {path}: {error}") from error
-        if not isinstance(payload, dict) or payload.get("kind") != "gait_policy" \
-                or payload.get("format") != CHECKPOINT_FORMAT:
-            raise ArtifactError(f"{path} is not a gait policy checkpoint of format {CHECKPOINT_FORMAT}")
+        payload = load_checkpoint(path, CHECKPOINT_KIND, CHECKPOINT_FORMAT, map_location)
         policy = LatentGaitPolicy(**payload["config"])
         policy.load_state_dict(payload["state_dict"])
         policy.eval()

@@ -9,6 +9,7 @@ import pytest
 from hierloco.envs.batched_sim import STATE_SPEC, BatchedSimulator
 from hierloco.envs.frames import com_state_from_base, quat_to_roll_pitch_yaw
 from hierloco.envs.robots import PHYSICS_STEPS_PER_CONTROL, get_robot, joint_qpos_indices
+from hierloco.envs.scripted_gait import sinusoidal_gait
 from tests.envs.toy_robot import make_toy_robot
 
 ROBOTS = ("a1", "daisy")
@@ -16,22 +17,7 @@ TOLERANCE = 1e-8
 
 
 def _gait_targets(robot, num_robots, num_steps, amplitude=0.15, frequency=2.0, seed=0):
-    """``B x T x J`` walking-like targets (rad): the standing pose plus one sinusoid per joint at ``frequency`` (Hz),
-    legs of a gait group in phase, groups evenly staggered, joints of a leg a quarter period apart; each copy gets
-    its own start phase and amplitude (between 0.8 and 1 times ``amplitude``)."""
-    rng = np.random.default_rng(seed)
-    t = np.arange(num_steps)[None, :] * 0.01  # s
-    start = rng.uniform(0, 2 * np.pi, (num_robots, 1))
-    scale = amplitude * rng.uniform(0.8, 1.0, (num_robots, 1))
-    group_of = {leg: i for i, group in enumerate(robot.gait_groups) for leg in group}
-    targets = np.tile(np.asarray(robot.standing_pose, dtype=np.float64), (num_robots, num_steps, 1))
-    joint = 0
-    for leg in robot.legs:
-        leg_phase = 2 * np.pi * group_of[leg.name] / len(robot.gait_groups)
-        for k in range(len(leg.joints)):
-            targets[..., joint] += scale * np.sin(2 * np.pi * frequency * t + start + leg_phase + k * np.pi / 2)
-            joint += 1
-    return targets
+    return sinusoidal_gait(robot, num_robots, num_steps, amplitude, frequency, seed, min_scale=0.8)
 
 
 def _step_one_copy(model, state, targets):

@@ -73,6 +73,13 @@ class BoxPlannerBase(MPCPlannerBase):
             td = td.get("next")
         return total
 
+    def initial_mean(self, batch: int) -> torch.Tensor:
+        """``batch x H x A``: the warm start when there is one, else the centre of the box."""
+        mean = self.warm_start(batch)
+        if mean is None:
+            mean = ((self.low + self.high) / 2).expand(batch, self.planning_horizon, -1)
+        return mean
+
     def warm_start(self, batch: int) -> torch.Tensor | None:
         """The previous plan shifted by one action (its last action repeated), ``batch x H x A``, or ``None``."""
         previous = self._previous

@@ -30,9 +30,7 @@ class BoxCEMPlanner(BoxPlannerBase):
     def planning(self, tensordict: TensorDictBase) -> torch.Tensor:
         td = self._flat(tensordict)
         batch = td.batch_size[0]
-        mean = self.warm_start(batch)
-        if mean is None:
-            mean = ((self.low + self.high) / 2).expand(batch, self.planning_horizon, -1)
+        mean = self.initial_mean(batch)
         std = ((self.high - self.low) / 2).expand_as(mean)
         best_score = torch.full((batch,), -torch.inf)
         best_plan = mean.clone()

@@ -29,9 +29,7 @@ class BoxMPPIPlanner(BoxPlannerBase):
     def planning(self, tensordict: TensorDictBase) -> torch.Tensor:
         td = self._flat(tensordict)
         batch = td.batch_size[0]
-        mean = self.warm_start(batch)
-        if mean is None:
-            mean = ((self.low + self.high) / 2).expand(batch, self.planning_horizon, -1)
+        mean = self.initial_mean(batch)
         std = self.noise_scale * (self.high - self.low) / 2
         for _ in range(self.optim_steps):
             noise = torch.randn((batch, self.num_candidates, *mean.shape[1:]), generator=self.generator)
