@@ -87,3 +87,13 @@ def test_bad_config_is_refused_before_any_work(tmp_path, override, message):
     result = run(f"run_dir={run_dir}", override)
     assert result.returncode != 0 and message in result.stderr
     assert not run_dir.exists()
+
+
+def test_same_seed_same_numbers(tiny_run, tmp_path):
+    """A second run with the same config in a fresh directory reproduces every number."""
+    run_dir, _ = tiny_run
+    again = tmp_path / "again"
+    result = run(f"run_dir={again}", "settings=[normal,legs_disabled]")
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert (again / "episodes.csv").read_text() == (run_dir / "episodes.csv").read_text()
+    assert (again / "experts.npz").read_bytes() == (run_dir / "experts.npz").read_bytes()
