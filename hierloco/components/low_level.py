@@ -56,6 +56,10 @@ class LowLevel:
     def reset(self, mask: np.ndarray | None = None) -> None:
         """Forgets any internal state for the copies in ``mask`` (default all); stateless low levels ignore it."""
 
+    def action_features(self, actions):
+        """The features a dynamics model sees for ``... x A`` actions (NumPy or torch): the actions themselves."""
+        return actions
+
     def describe(self) -> dict:
         """What identifies this low level (stored with the data collected on it)."""
         return {"kind": self.kind, "robot": self.robot.name, "steps_per_action": self.steps_per_action,
@@ -107,6 +111,14 @@ class ExpertReplayLowLevel(LowLevel):
         self.num_choices = library.num_experts
         self.action_low = np.zeros(1)
         self.action_high = np.full(1, library.num_experts - 1.0)
+
+    def action_features(self, actions):
+        """``... x 1`` expert indices -> ``... x G`` one-hot vectors (NumPy or torch)."""
+        if isinstance(actions, torch.Tensor):
+            index = actions[..., 0].round().long().clamp(0, self.num_choices - 1)
+            return torch.nn.functional.one_hot(index, self.num_choices).to(torch.float32)
+        index = np.clip(np.rint(np.asarray(actions)[..., 0]).astype(np.int64), 0, self.num_choices - 1)
+        return np.eye(self.num_choices)[index]
 
     def run(self, sim, actions):
         index = np.rint(self._check(sim, actions)[:, 0]).astype(np.int64)

@@ -37,13 +37,15 @@ from hierloco.envs.tasks import Task
 class _CoMStep(nn.Module):
     """``(com_state, action, task_episode, task_step) -> (next com_state, reward, next task_step)``."""
 
-    def __init__(self, model: nn.Module, task: Task | None):
+    def __init__(self, model: nn.Module, task: Task | None, action_features=None):
         super().__init__()
         self.model = model
         self.task = task
+        self.action_features = action_features
 
     def forward(self, com_state, action, episode, step):
-        next_state = self.model.predict(com_state, action.to(com_state.dtype))
+        features = action if self.action_features is None else self.action_features(action)
+        next_state = self.model.predict(com_state, features.to(com_state.dtype))
         if self.task is None:
             reward = torch.zeros_like(next_state[..., :1])
         else:
@@ -60,12 +62,15 @@ class CoMWorldModelEnv(ModelBasedEnvBase):
         action_low, action_high: the action box (``A``); with ``num_choices`` the action is an index in
             ``[0, num_choices)`` (LIB's experts), passed to the model as a float.
         task: scores transitions (reward ``-cost``); ``None`` gives zero reward.
+        action_features: maps actions to the model's input features (e.g. expert indices to one-hot vectors,
+            :meth:`hierloco.components.low_level.LowLevel.action_features`); default: the actions themselves.
     """
 
     def __init__(self, model: nn.Module, *, action_low: Sequence[float] | None = None,
                  action_high: Sequence[float] | None = None, num_choices: int | None = None,
-                 task: Task | None = None, device: str = "cpu"):
-        step = TensorDictModule(_CoMStep(model, task), in_keys=["com_state", "action", "task_episode", "task_step"],
+                 task: Task | None = None, action_features=None, device: str = "cpu"):
+        step = TensorDictModule(_CoMStep(model, task, action_features),
+                                in_keys=["com_state", "action", "task_episode", "task_step"],
                                 out_keys=["com_state", "reward", "task_step"])
         super().__init__(step, device=device)
         self.model = model

@@ -1,0 +1,30 @@
+"""IK end to end: CoM dynamics over velocity commands run by the expert controller -> MPC over the commands.
+
+    python recipes/ik/train.py                       # paper scale, A1, seed 0
+    python recipes/ik/train.py preset=small robot=daisy settings=[normal,legs_disabled]
+    python recipes/ik/train.py -m seed=0,1,2         # a sweep (Hydra multirun)
+
+Each stage is cached in the run directory with its config and reused when the config matches.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import hydra
+from omegaconf import DictConfig
+
+sys.path[:0] = [str(Path(__file__).resolve().parent), str(Path(__file__).resolve().parents[1])]
+import utils  # noqa: E402  (this recipe's factories)
+from common import pipeline  # noqa: E402  (the model-based pipeline shared by LAT, LIB and IK)
+
+
+@hydra.main(config_path=".", config_name="config", version_base=None)
+def main(cfg: DictConfig) -> None:
+    utils.validate(cfg)
+    pipeline.run_pipeline(cfg, utils.METHOD, utils.prepare)
+
+
+if __name__ == "__main__":
+    main()
