@@ -46,12 +46,15 @@ class RaibertController:
         yaw_gain: k_yaw of the footstep rotation, in s.
         integral_gain: gain in 1/s of the outer loop that integrates the velocity and yaw-rate errors into the
             command the footstep law follows (it removes the steady-state error of the proportional law).
+        integral_limit: bound on that correction, ``(vx, vy, yaw_rate)`` in m/s, m/s, rad/s (anti-windup, for a
+            robot that cannot follow its command, e.g. with disabled legs); default: half the command box.
         velocity_filter: time constant in s of the low-pass filter on the measured velocities.
     """
 
     def __init__(self, robot: str | RobotSpec, num_robots: int, *, gait_period: float | None = None,
                  swing_height: float | None = None, feedback_gain: float = 0.05, yaw_gain: float = 0.05,
-                 integral_gain: float = 1.0, velocity_filter: float | None = None):
+                 integral_gain: float = 1.0, integral_limit: tuple[float, float, float] | None = None,
+                 velocity_filter: float | None = None):
         self.robot = get_robot(robot)
         self.num_robots = int(num_robots)
         self.kinematics = LegKinematics(self.robot)
@@ -60,6 +63,8 @@ class RaibertController:
         self.feedback_gain = float(feedback_gain)
         self.yaw_gain = float(yaw_gain)
         self.integral_gain = float(integral_gain)
+        span = np.asarray(self.robot.command_high) - np.asarray(self.robot.command_low)
+        self.integral_limit = np.asarray(integral_limit if integral_limit is not None else span / 2, dtype=float)
         self.velocity_filter = float(velocity_filter or self.gait_period)
         self.dt = CONTROL_TIMESTEP
         steps = self.gait_period / self.dt
@@ -133,6 +138,7 @@ class RaibertController:
             self.yaw_rate += alpha * (yaw_rate - self.yaw_rate)
             measured = np.concatenate([self.velocity, self.yaw_rate[:, None]], -1)
             self.correction += self.integral_gain * self.dt * (command - measured)
+            np.clip(self.correction, -self.integral_limit, self.integral_limit, out=self.correction)
         v_des, w_des = command[:, :2] + self.correction[:, :2], command[:, 2] + self.correction[:, 2]
 
         progress = self.swing_progress()
