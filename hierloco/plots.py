@@ -147,3 +147,36 @@ def plot_latent_map(latents: np.ndarray, com_paths: np.ndarray, path: str | os.P
     ax_xy.set_title("CoM paths")
     fig.suptitle(title or "CoM paths over a grid of latent actions")
     save_figure(fig, path)
+
+
+def plot_comparison(rows: Sequence[dict], path: str | os.PathLike, *, setting: str = "normal",
+                    tasks: Sequence[str] = ("velocity_tracking", "goal_reaching", "trajectory_tracking"),
+                    title: str | None = None) -> None:
+    """Bar charts like the paper's baseline figure: normalised cost (mean +- std over targets and seeds) per task
+    and method, one panel per robot, from per-episode result rows."""
+    rows = [r for r in rows if r["setting"] == setting and r["task"] in tasks]
+    robots = sorted({r["robot"] for r in rows})
+    methods = sorted({r["method"] for r in rows}, key=lambda m: (m != "lat", m))
+    if not rows:
+        raise ValueError(f"no result rows for setting {setting!r} and tasks {list(tasks)}")
+    fig, axes = plt.subplots(1, len(robots), figsize=(5.5 * len(robots), 4), squeeze=False)
+    width = 0.8 / max(1, len(methods))
+    colors = plt.cm.tab10(np.arange(len(methods)))
+    for ax, robot in zip(axes[0], robots):
+        for m, method in enumerate(methods):
+            means, stds = [], []
+            for task in tasks:
+                values = [r["normalized_cost"] for r in rows if (r["robot"], r["method"], r["task"]) ==
+                          (robot, method, task)]
+                means.append(np.mean(values) if values else np.nan)
+                stds.append(np.std(values) if values else 0.0)
+            x = np.arange(len(tasks)) + (m - (len(methods) - 1) / 2) * width
+            ax.bar(x, means, width, yerr=stds, capsize=3, color=colors[m], label=method.upper())
+        ax.set_xticks(np.arange(len(tasks)), [t.replace("_", "\n") for t in tasks])
+        ax.set_ylabel("normalised cost (lower is better)")
+        ax.axhline(1.0, color="k", lw=0.8, ls=":")
+        ax.set_title(f"{robot} ({setting})")
+        ax.grid(axis="y", alpha=0.3)
+    axes[0][0].legend()
+    fig.suptitle(title or "comparison of methods")
+    save_figure(fig, path)

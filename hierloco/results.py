@@ -80,7 +80,7 @@ def _number(value) -> bool:
         return False
 
 
-def _csv_text(rows: Iterable[Mapping], columns: list[str]) -> str:
+def csv_text(rows: Iterable[Mapping], columns: list[str]) -> str:
     buffer = io.StringIO()
     writer = csv.DictWriter(buffer, fieldnames=columns, extrasaction="ignore", lineterminator="\n")
     writer.writeheader()
@@ -104,8 +104,8 @@ def read_csv(path: str | os.PathLike) -> list[dict]:
 def write_results(run_dir: str | os.PathLike, episodes: list[dict], extra_markdown: str = "") -> str:
     """Writes ``results.csv``, ``episodes.csv`` and ``results.md`` into ``run_dir`` atomically; returns the table."""
     run_dir = Path(run_dir)
-    write_text(run_dir / "episodes.csv", _csv_text(episodes, EPISODE_COLUMNS))
-    write_text(run_dir / "results.csv", _csv_text(summarize_seeds(episodes), RESULT_COLUMNS))
+    write_text(run_dir / "episodes.csv", csv_text(episodes, EPISODE_COLUMNS))
+    write_text(run_dir / "results.csv", csv_text(summarize_seeds(episodes), RESULT_COLUMNS))
     table = markdown_table(episodes)
     write_text(run_dir / "results.md", "# Results\n\nNormalized cost: mean per-step task cost / that of a robot "
                                        "standing still (1 = no better than standing, 0 = perfect); mean +- std "
