@@ -17,6 +17,15 @@ if [ ! -f .venv/.install-stamp ] || [ pyproject.toml -nt .venv/.install-stamp ];
   .venv/bin/python -m pip install --quiet -e ".[test]"
   touch .venv/.install-stamp
 fi
+# headless rendering (rollout videos) needs EGL from Mesa; install it once where we may
+if ! ldconfig -p 2>/dev/null | grep -q "libEGL_mesa.so.0"; then
+  if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+    (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libegl1 libegl-mesa0 \
+      libgl1-mesa-dri libgbm1 libopengl0 libglvnd0 >/dev/null) || echo "run.sh: could not install EGL (Mesa)" >&2
+  else
+    echo "run.sh: EGL (Mesa) is missing: install libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1 for videos" >&2
+  fi
+fi
 export MUJOCO_GL=${MUJOCO_GL:-egl}
 export WANDB_MODE=${WANDB_MODE:-offline}
 cmd=${1:-main}

@@ -58,6 +58,15 @@ class RunLogger:
         for name, value in metrics.items():
             self.log_scalar(name, value, step)
 
+    def log_video(self, name: str, frames, fps: int = 20, step: int = 0) -> None:
+        """``T x H x W x 3`` uint8 frames to the loggers that take videos (wandb); CSV keeps none."""
+        import numpy as np
+        import torch
+
+        for logger in self.loggers[1:]:
+            video = torch.as_tensor(np.ascontiguousarray(np.asarray(frames).transpose(0, 3, 1, 2)))[None]
+            logger.log_video(name, video, step=step, fps=fps)
+
     def close(self) -> None:
         for logger in self.loggers:
             experiment = getattr(logger, "experiment", None)

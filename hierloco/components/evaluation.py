@@ -36,6 +36,7 @@ class TaskRollout:
         actions: ``E x T x A`` chosen actions.
         com_paths: ``E x (T * N) x 5`` CoM states at 100 Hz (when the env records), else ``None``.
         foot_contacts: ``E x (T * N) x L`` (when the env records), else ``None``.
+        qpos: ``E x (T * N) x nq`` generalised positions at 100 Hz (when the env records), for videos.
         fell: ``E`` bool, whether the robot fell (or blew up) during the episode.
         plan_seconds: mean wall-clock of one planner call.
     """
@@ -44,6 +45,7 @@ class TaskRollout:
     actions: np.ndarray
     com_paths: np.ndarray | None
     foot_contacts: np.ndarray | None
+    qpos: np.ndarray | None
     fell: np.ndarray
     plan_seconds: float
 
@@ -70,13 +72,14 @@ def run_task(env: LatentActionEnv, planner, task: Task, episodes=None, progress:
     rollout = torch.stack(steps, dim=1)  # E x T
     states = torch.cat([rollout["com_state"], rollout["next", "com_state"][:, -1:]], 1)
     result = task.evaluate(states, episodes)
-    paths = contacts = None
+    paths = contacts = qpos = None
     if env.record:
         paths = rollout["next", "com_path"].flatten(1, 2).numpy()
         contacts = rollout["next", "foot_contacts"].flatten(1, 2).numpy()
+        qpos = rollout["next", "qpos"].flatten(1, 2).numpy()
     fell = rollout["next", "terminated"].squeeze(-1).any(1).numpy()
     actions = rollout["action"].reshape(count, task.num_steps, -1).float().numpy()
-    return TaskRollout(result, actions, paths, contacts, fell, plan_time / task.num_steps)
+    return TaskRollout(result, actions, paths, contacts, qpos, fell, plan_time / task.num_steps)
 
 
 def latent_grid_paths(low_level, *, grid: int = 7, num_actions: int = 3, seed: int = 0):

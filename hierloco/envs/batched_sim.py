@@ -53,6 +53,7 @@ class SimulationResult:
         foot_contacts: ``B x T x L`` bool, leg order.
         fallen: ``B x T`` bool, true from the first step the robot fell (roll, pitch or height out of limits).
         unstable: ``B x T`` bool, true from the first step the physics blew up (NaN or MuJoCo auto-reset).
+        qpos: ``B x T x nq`` the full generalised positions (for rendering).
     """
 
     com_state: np.ndarray
@@ -64,6 +65,7 @@ class SimulationResult:
     foot_contacts: np.ndarray
     fallen: np.ndarray
     unstable: np.ndarray
+    qpos: np.ndarray
 
     @property
     def failed(self) -> np.ndarray:
@@ -144,6 +146,11 @@ class BatchedSimulator:
         return com_state_from_base(qpos[:, 0:3], qpos[:, 3:7], qvel[:, 0:3])
 
     @property
+    def qpos(self) -> np.ndarray:
+        """``B x nq`` current generalised positions."""
+        return self.state[:, self._qpos]
+
+    @property
     def joint_positions(self) -> np.ndarray:
         """``B x J`` current joint angles in rad."""
         return self.state[:, self._qpos][:, self._joint_qpos]
@@ -197,6 +204,7 @@ class BatchedSimulator:
             foot_contacts=sensors[:, k - 1::k, : len(robot.legs)] > FOOT_CONTACT_FORCE,
             fallen=fallen,
             unstable=unstable,
+            qpos=qpos,
         )
 
     def close(self) -> None:

@@ -37,8 +37,9 @@ class LatentActionEnv(EnvBase):
         num_robots: B, the env's batch size.
         disabled_legs: legs locked at their standing angles (the adverse setting).
         init_joint_noise: rad of uniform noise on the standing joint angles at reset.
-        record: also return, per action, the ``N`` CoM states ``com_path`` (``B x N x 5``) and foot contacts
-            ``foot_contacts`` (``B x N x L``), for plots.
+        record: also return, per action, the ``N`` CoM states ``com_path`` (``B x N x 5``), foot contacts
+            ``foot_contacts`` (``B x N x L``) and generalised positions ``qpos`` (``B x N x nq``), for plots and
+            videos.
         seed: seeds the reset noise.
         nthread: simulation threads.
     """
@@ -60,6 +61,7 @@ class LatentActionEnv(EnvBase):
             n, legs = self.steps_per_action, len(self.robot.legs)
             observation["com_path"] = Unbounded((b, n, 5), device=self.device)
             observation["foot_contacts"] = Categorical(2, (b, n, legs), dtype=torch.bool, device=self.device)
+            observation["qpos"] = Unbounded((b, n, self.sim.model.nq), dtype=torch.float64, device=self.device)
         self.observation_spec = Composite(observation, shape=(b,), device=self.device)
         if low_level.num_choices is not None:
             self.action_spec = Categorical(low_level.num_choices, (b, 1), dtype=torch.int64, device=self.device)
@@ -86,10 +88,12 @@ class LatentActionEnv(EnvBase):
                 n, legs = self.steps_per_action, len(self.robot.legs)
                 path = np.repeat(state[:, None], n, 1)
                 contacts = np.ones((len(state), n, legs), dtype=bool)
+                qpos = np.repeat(self.sim.qpos[:, None], n, 1)
             else:
-                path, contacts = result.com_state, result.foot_contacts
+                path, contacts, qpos = result.com_state, result.foot_contacts, result.qpos
             obs["com_path"] = torch.as_tensor(path, dtype=torch.float32, device=self.device)
             obs["foot_contacts"] = torch.as_tensor(contacts, device=self.device)
+            obs["qpos"] = torch.as_tensor(qpos, dtype=torch.float64, device=self.device)
         return obs
 
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:

@@ -31,6 +31,7 @@ from hierloco.envs.world_model import CoMWorldModelEnv
 from hierloco.io import write_text
 from hierloco.loggers import RunLogger
 from hierloco.plots import plot_gait_diagram, plot_latent_map, plot_task_paths, plot_velocity_tracking
+from hierloco.render import render_frames, save_video
 from hierloco.results import episode_rows, write_results
 from hierloco.runs import RunDirectory
 
@@ -217,6 +218,8 @@ def evaluate(cfg, run: RunDirectory, method: str, low_level: LowLevelRecipe, mod
             if name == "velocity_tracking":
                 plot_velocity_tracking(task, rollout.com_paths[0], figures / f"{setting}_{name}_velocity.png",
                                        title=title)
+            if name in (cfg.eval.videos or []):
+                write_video(cfg, run, task, rollout, setting, name, logger)
             if name == "goal_reaching":
                 plot_gait_diagram(rollout.foot_contacts[0, : 6 * low.steps_per_action],
                                   get_robot(cfg.robot).leg_names, figures / f"{setting}_gait_during_{name}.png",
@@ -224,6 +227,22 @@ def evaluate(cfg, run: RunDirectory, method: str, low_level: LowLevelRecipe, mod
                                   title=f"{label}: gait during {name} (pink stance, blue swing; dashed: new "
                                         "action)")
     return rows
+
+
+VIDEO_FPS = 20
+
+
+def write_video(cfg, run: RunDirectory, task, rollout, setting: str, name: str, logger: RunLogger) -> None:
+    """The first episode of ``task`` as ``videos/<setting>_<name>.mp4`` (MuJoCo offscreen, 20 fps), goals or the
+    reference path drawn on the floor; also sent to wandb when it is a backend."""
+    stride = int(round(1.0 / (VIDEO_FPS * CONTROL_TIMESTEP)))
+    markers = getattr(task, "goals", None)
+    markers = markers[:1].numpy() if markers is not None else getattr(task, "references", None)
+    markers = None if markers is None else np.asarray(markers)[:: max(1, len(markers) // 40)]
+    frames = render_frames(cfg.robot, rollout.qpos[0, ::stride], disabled_legs=disabled_legs(cfg, setting),
+                           markers=markers)
+    save_video(frames, run.path / "videos" / f"{setting}_{name}.mp4", fps=VIDEO_FPS)
+    logger.log_video(f"eval/{setting}/{name}/video", frames, fps=VIDEO_FPS)
 
 
 def latent_map(cfg, run: RunDirectory, method: str, low_level: LowLevel) -> Path | None:

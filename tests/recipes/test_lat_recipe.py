@@ -43,6 +43,7 @@ def test_outputs(tiny_run):
     assert {"normal_goal_reaching_paths.png", "normal_gait_during_goal_reaching.png",
             "normal_trajectory_tracking_paths.png", "legs_disabled_velocity_tracking_velocity.png",
             "latent_map.png"} <= figures  # the tiny preset's latent space is 2-D
+    assert (run_dir / "videos" / "normal_goal_reaching.mp4").stat().st_size > 1000
     report = json.loads((run_dir / "report.json").read_text())
     assert len(report["dynamics_model_normal"]["heldout_rmse"]) == 5
     assert list((run_dir / "logs").rglob("*.csv")), "the CSV logger wrote metrics"

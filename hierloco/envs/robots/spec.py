@@ -183,12 +183,18 @@ def compile_model(robot: RobotSpec, disabled_legs: Sequence[str] = ()) -> mujoco
 def _ensure_floor(spec: mujoco.MjSpec) -> None:
     has_plane = any(g.type == mujoco.mjtGeom.mjGEOM_PLANE for g in spec.worldbody.geoms)
     if not has_plane:
+        # a 0.5 m checker floor, so that motion shows in renderings
+        spec.add_texture(name="floor_grid", type=mujoco.mjtTexture.mjTEXTURE_2D,
+                         builtin=mujoco.mjtBuiltin.mjBUILTIN_CHECKER, rgb1=[0.45, 0.5, 0.55], rgb2=[0.35, 0.4, 0.45],
+                         width=256, height=256)
+        material = spec.add_material(name="floor_grid", texrepeat=[1, 1], texuniform=True)
+        material.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = "floor_grid"
         spec.worldbody.add_geom(
             name=FLOOR_NAME,
             type=mujoco.mjtGeom.mjGEOM_PLANE,
             size=[0, 0, 0.05],
             friction=[1.0, 0.005, 0.0001],
-            rgba=[0.5, 0.55, 0.6, 1],
+            material="floor_grid",
             contype=1,
             conaffinity=1,
         )
