@@ -1,8 +1,9 @@
 """Closed-loop MPC on the simulated robots: run a task's episodes with a planner and score them (SPEC 5.4, 6).
 
 Every episode of the task runs on its own robot of a :class:`LatentActionEnv` (8 goals -> 8 robots in one batched
-simulation). At each task step the planner chooses an action from the measured state with the world model, the
-robot executes it for one action (N control steps), and MPC re-plans from the new measured state. Episodes run their
+simulation). At each task step the planner chooses an action from the measured state with the world model (or a
+learned policy acts), the robot executes it for one action (N control steps), and MPC re-plans from the new
+measured state. Episodes run their
 full length, so the cost covers every step; a robot that falls stays down, keeps paying the cost and is counted.
 
 Example:
@@ -14,10 +15,11 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import Sequence
 
 import numpy as np
 import torch
-from torchrl.envs import TransformedEnv
+from torchrl.envs import Compose, TransformedEnv
 from torchrl.envs.utils import step_mdp
 from tqdm.auto import tqdm
 
@@ -38,7 +40,7 @@ class TaskRollout:
         foot_contacts: ``E x (T * N) x L`` (when the env records), else ``None``.
         qpos: ``E x (T * N) x nq`` generalised positions at 100 Hz (when the env records), for videos.
         fell: ``E`` bool, whether the robot fell (or blew up) during the episode.
-        plan_seconds: mean wall-clock of one planner call.
+        plan_seconds: mean wall-clock of one policy (planner) call.
     """
 
     result: TaskResult
@@ -50,21 +52,27 @@ class TaskRollout:
     plan_seconds: float
 
 
-def run_task(env: LatentActionEnv, planner, task: Task, episodes=None, progress: bool = False) -> TaskRollout:
-    """Runs every episode of ``task`` with MPC (``planner``) on ``env``'s robots; ``planner.env`` is re-targeted
-    to ``task``. ``env`` needs one robot per episode (``episodes``: which episode each robot runs)."""
+def run_task(env: LatentActionEnv, policy, task: Task, episodes=None, transforms: Sequence = (),
+             progress: bool = False) -> TaskRollout:
+    """Runs every episode of ``task`` on ``env``'s robots with ``policy``, one robot per episode (``episodes``:
+    which episode each robot runs).
+
+    ``policy`` is an MPC planner (its world model env is re-targeted to ``task`` and its warm start reset) or any
+    TensorDict policy, e.g. a SAC actor; ``transforms`` go after the task transform (e.g. a goal observation)."""
     count = env.batch_size[0]
     episodes = torch.arange(count) % task.num_episodes if episodes is None else torch.as_tensor(episodes)
     if episodes.numel() != count:
         raise ValueError(f"{count} robots for {episodes.numel()} episodes")
-    planner.env.set_task(task)
-    planner.reset()
-    task_env = TransformedEnv(env, TaskTransform(task, episodes))
+    if hasattr(getattr(policy, "env", None), "set_task"):
+        policy.env.set_task(task)
+    if hasattr(policy, "reset"):
+        policy.reset()
+    task_env = TransformedEnv(env, Compose(TaskTransform(task, episodes), *transforms))
     td = task_env.reset()
     steps, plan_time = [], 0.0
     for _ in tqdm(range(task.num_steps), desc=task.name, disable=not progress, leave=False):
         start = time.perf_counter()
-        td = planner(td)
+        td = policy(td)
         plan_time += time.perf_counter() - start
         td = task_env.step(td)
         steps.append(td.exclude("next").update({"next": td.get("next")}).clone())

@@ -32,7 +32,7 @@ import numpy as np
 import torch
 from tensordict import TensorDictBase
 
-from hierloco.envs.frames import wrap_angle
+from hierloco.envs.frames import world_to_local, wrap_angle
 from hierloco.envs.robots import START_YAW
 
 W_POSITION, W_YAW = 2.0, 1.0  # [w1, w2]
@@ -67,6 +67,18 @@ class Task:
 
     def _tracking_error(self, state, next_state, target) -> torch.Tensor:
         raise NotImplementedError
+
+    target_is_velocity: bool = False
+
+    def relative_target(self, com_state, episode, step) -> torch.Tensor:
+        """``... x 2`` the target of task step ``step`` in the robot's local frame: a velocity (m/s) as it is, a
+        position (m) relative to the robot. What a goal-conditioned policy observes."""
+        state = _as_tensor(com_state)
+        episode, step = torch.broadcast_tensors(_as_tensor(episode).long(), _as_tensor(step).long())
+        target = self.target(episode, step.clamp(0, self.num_steps - 1)).to(state.dtype)
+        if not self.target_is_velocity:
+            target = target - state[..., :2]
+        return world_to_local(target, state[..., 2])
 
     def cost(self, com_state, next_com_state, episode, step) -> torch.Tensor:
         """Cost ``...`` of the transition ``com_state -> next_com_state`` (``... x 5`` world) that ends task step
@@ -147,6 +159,7 @@ class VelocityTracking(Task):
 
     name = "velocity_tracking"
     has_success = False  # final_error is the velocity error of the last step (m/s)
+    target_is_velocity = True
 
     def __init__(self, velocities: Sequence[Sequence[float]] = ((0.0, 0.2), (0.2, 0.0), (0.0, -0.2), (-0.2, 0.0)),
                  steps_per_target: int = 5, rounds: int = 2):

@@ -149,3 +149,41 @@ class TaskTransform(Transform):
         for key in ("task_episode", "task_step"):
             observation_spec[key] = Unbounded((*batch, 1), dtype=torch.int64, device=observation_spec.device)
         return observation_spec
+
+
+class GoalObservation(Transform):
+    """The observation of a goal-conditioned policy (SAC's high level), from the CoM and task state.
+
+    Writes ``goal_observation`` (``... x 7``): the task's target in the robot's local frame
+    (:meth:`hierloco.envs.tasks.Task.relative_target`, ``2``), the CoM velocity in the local frame (``2``), the sine
+    and cosine of the yaw error to the task's yaw target (``2``) and the fraction of the episode done (``1``).
+    Sits after a :class:`TaskTransform` of the same task.
+    """
+
+    SIZE = 7
+
+    def __init__(self, task, state_key: str = "com_state", out_key: str = "goal_observation"):
+        super().__init__(in_keys=[state_key, "task_episode", "task_step"], out_keys=[out_key])
+        self.task = task
+
+    def _call(self, tensordict: TensorDictBase) -> TensorDictBase:
+        state = tensordict.get(self.in_keys[0])
+        episode = tensordict.get("task_episode").squeeze(-1)
+        step = tensordict.get("task_step").squeeze(-1)
+        target = self.task.relative_target(state, episode, step).to(state.dtype)
+        velocity = world_to_local(state[..., 3:5], state[..., 2])
+        yaw_error = self.task.start_yaw - state[..., 2]
+        progress = (step.to(state.dtype) / self.task.num_steps)[..., None]
+        features = torch.cat([target, velocity, torch.sin(yaw_error)[..., None], torch.cos(yaw_error)[..., None],
+                              progress], -1)
+        tensordict.set(self.out_keys[0], features)
+        return tensordict
+
+    def _reset(self, tensordict: TensorDictBase, tensordict_reset: TensorDictBase) -> TensorDictBase:
+        return self._call(tensordict_reset)
+
+    def transform_observation_spec(self, observation_spec: Composite) -> Composite:
+        like = observation_spec[self.in_keys[0]]
+        observation_spec[self.out_keys[0]] = Unbounded((*like.shape[:-1], self.SIZE), dtype=like.dtype,
+                                                       device=like.device)
+        return observation_spec

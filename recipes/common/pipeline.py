@@ -188,8 +188,6 @@ def evaluate(cfg, run: RunDirectory, method: str, low_level: LowLevelRecipe, mod
              logger: RunLogger) -> list:
     """Runs every task with MPC, logs ``eval/...`` metrics, writes figures; returns per-episode result rows."""
     rows = []
-    figures = run.path / "figures"
-    label = f"{method.upper()} {cfg.robot} ({setting})"
     for name, task in make_tasks(cfg).items():
         low = low_level.make(task.num_episodes)
         planner = make_planner(cfg, make_world_model(cfg, model, low))
@@ -197,35 +195,41 @@ def evaluate(cfg, run: RunDirectory, method: str, low_level: LowLevelRecipe, mod
                               record=True, seed=cfg.seed)
         rollout = run_task(env, planner, task, progress=cfg.progress)
         env.close()
-        new_rows = episode_rows(rollout, method=method, robot=cfg.robot, setting=setting, seed=cfg.seed)
-        result = rollout.result
-        metrics = {f"eval/{setting}/{name}/normalized_cost": float(np.mean(result.normalized_cost)),
-                   f"eval/{setting}/{name}/final_error": float(np.mean(result.final_error)),
-                   f"eval/{setting}/{name}/falls": float(rollout.fell.sum()),
-                   f"time/{setting}/{name}/plan_seconds": rollout.plan_seconds}
-        if task.has_success:
-            metrics[f"eval/{setting}/{name}/success_rate"] = float(np.mean(result.success))
-        if hasattr(task, "path_distance"):
-            distance = task.path_distance(rollout.com_paths[..., :2]).mean(1)  # per episode, over 100 Hz samples
-            for row, value in zip(new_rows, distance):
-                row["path_distance"] = float(value)
-            metrics[f"eval/{setting}/{name}/path_distance"] = float(distance.mean())
-        rows += new_rows
-        logger.log_metrics(metrics)
-        if cfg.eval.figures:
-            title = f"{label}: {name}"
-            plot_task_paths(task, rollout.com_paths, figures / f"{setting}_{name}_paths.png", title=title)
-            if name == "velocity_tracking":
-                plot_velocity_tracking(task, rollout.com_paths[0], figures / f"{setting}_{name}_velocity.png",
-                                       title=title)
-            if name in (cfg.eval.videos or []):
-                write_video(cfg, run, task, rollout, setting, name, logger)
-            if name == "goal_reaching":
-                plot_gait_diagram(rollout.foot_contacts[0, : 6 * low.steps_per_action],
-                                  get_robot(cfg.robot).leg_names, figures / f"{setting}_gait_during_{name}.png",
-                                  action_steps=low.steps_per_action,
-                                  title=f"{label}: gait during {name} (pink stance, blue swing; dashed: new "
-                                        "action)")
+        rows += report_task(cfg, run, method, setting, name, task, rollout, logger, low.steps_per_action)
+    return rows
+
+
+def report_task(cfg, run: RunDirectory, method: str, setting: str, name: str, task, rollout, logger: RunLogger,
+                steps_per_action: int) -> list:
+    """Result rows, ``eval/...`` metrics, figures and the video of one evaluated task."""
+    rows = episode_rows(rollout, method=method, robot=cfg.robot, setting=setting, seed=cfg.seed)
+    result = rollout.result
+    metrics = {f"eval/{setting}/{name}/normalized_cost": float(np.mean(result.normalized_cost)),
+               f"eval/{setting}/{name}/final_error": float(np.mean(result.final_error)),
+               f"eval/{setting}/{name}/falls": float(rollout.fell.sum()),
+               f"time/{setting}/{name}/plan_seconds": rollout.plan_seconds}
+    if task.has_success:
+        metrics[f"eval/{setting}/{name}/success_rate"] = float(np.mean(result.success))
+    if hasattr(task, "path_distance"):
+        distance = task.path_distance(rollout.com_paths[..., :2]).mean(1)  # per episode, over 100 Hz samples
+        for row, value in zip(rows, distance):
+            row["path_distance"] = float(value)
+        metrics[f"eval/{setting}/{name}/path_distance"] = float(distance.mean())
+    logger.log_metrics(metrics)
+    if cfg.eval.figures:
+        figures = run.path / "figures"
+        title = f"{method.upper()} {cfg.robot} ({setting}): {name}"
+        plot_task_paths(task, rollout.com_paths, figures / f"{setting}_{name}_paths.png", title=title)
+        if name == "velocity_tracking":
+            plot_velocity_tracking(task, rollout.com_paths[0], figures / f"{setting}_{name}_velocity.png",
+                                   title=title)
+        if name == "goal_reaching":
+            plot_gait_diagram(rollout.foot_contacts[0, : 6 * steps_per_action], get_robot(cfg.robot).leg_names,
+                              figures / f"{setting}_gait_during_{name}.png", action_steps=steps_per_action,
+                              title=f"{method.upper()} {cfg.robot} ({setting}): gait during {name} (pink stance, "
+                                    "blue swing; dashed: new action)")
+    if name in (cfg.eval.videos or []):
+        write_video(cfg, run, task, rollout, setting, name, logger)
     return rows
 
 
@@ -257,15 +261,41 @@ def latent_map(cfg, run: RunDirectory, method: str, low_level: LowLevel) -> Path
 
 
 # ---------------------------------------------------------------------------------------------------- main
-def run_pipeline(cfg: DictConfig, method: str, prepare: Callable) -> str:
-    """The whole model-based pipeline; returns the results table. ``prepare(cfg, run, logger, reports)`` builds
-    the recipe's low level (running its own cached stages) and returns a :class:`LowLevelRecipe`."""
+def open_run(cfg: DictConfig, method: str) -> tuple[RunDirectory, RunLogger]:
+    """The run directory and the loggers of a recipe run."""
     torch.manual_seed(cfg.seed)
-    start = time.perf_counter()
     run = RunDirectory(cfg.run_dir)
     logger = RunLogger(f"{method}_{cfg.robot}_seed{cfg.seed}", run.path / "logs", backends=cfg.logger.backends,
                        project=cfg.logger.project, wandb_mode=cfg.logger.wandb_mode,
                        config=OmegaConf.to_container(cfg, resolve=True))
+    return run, logger
+
+
+def finish_run(cfg: DictConfig, method: str, run: RunDirectory, logger: RunLogger, episodes: list, reports: dict,
+               start: float) -> str:
+    """Writes the report, the results tables and the config; prints the table; returns it."""
+    reports["stage_seconds"] = run.timings
+    reports["reused_stages"] = run.reused
+    reports["total_seconds"] = time.perf_counter() - start
+    write_text(run.path / "report.json", json.dumps(reports, indent=2, default=float))
+    for stage, seconds in run.timings.items():
+        logger.log_scalar(f"time/{stage}", seconds)
+    table = write_results(run.path, episodes)
+    write_text(run.path / "config.yaml", OmegaConf.to_yaml(cfg, resolve=True))
+    logger.close()
+    print(f"\n{method.upper()} on {cfg.robot} (seed {cfg.seed}), run directory {run.path}\n")
+    print(table)
+    print("stage wall-clock (s): " + ", ".join(f"{k} {v:.1f}" + (" (cached)" if run.reused[k] else "")
+                                              for k, v in run.timings.items()))
+    print(f"figures in {run.path / 'figures'}/, results in {run.path / 'results.csv'}")
+    return table
+
+
+def run_pipeline(cfg: DictConfig, method: str, prepare: Callable) -> str:
+    """The whole model-based pipeline; returns the results table. ``prepare(cfg, run, logger, reports)`` builds
+    the recipe's low level (running its own cached stages) and returns a :class:`LowLevelRecipe`."""
+    start = time.perf_counter()
+    run, logger = open_run(cfg, method)
     reports: dict = {}
     low_level = prepare(cfg, run, logger, reports)
     episodes = []
@@ -282,19 +312,4 @@ def run_pipeline(cfg: DictConfig, method: str, prepare: Callable) -> str:
                               lambda: evaluate(cfg, run, method, low_level, model, setting, logger),
                               save_json, load_json, f"evaluation_{setting}.json")
     latent_map(cfg, run, method, low_level.make(1))
-
-    reports["stage_seconds"] = run.timings
-    reports["reused_stages"] = run.reused
-    reports["total_seconds"] = time.perf_counter() - start
-    write_text(run.path / "report.json", json.dumps(reports, indent=2, default=float))
-    for stage, seconds in run.timings.items():
-        logger.log_scalar(f"time/{stage}", seconds)
-    table = write_results(run.path, episodes)
-    write_text(run.path / "config.yaml", OmegaConf.to_yaml(cfg, resolve=True))
-    logger.close()
-    print(f"\n{method.upper()} on {cfg.robot} (seed {cfg.seed}), run directory {run.path}\n")
-    print(table)
-    print("stage wall-clock (s): " + ", ".join(f"{k} {v:.1f}" + (" (cached)" if run.reused[k] else "")
-                                              for k, v in run.timings.items()))
-    print(f"figures in {run.path / 'figures'}/, results in {run.path / 'results.csv'}")
-    return table
+    return finish_run(cfg, method, run, logger, episodes, reports, start)
