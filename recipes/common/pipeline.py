@@ -66,19 +66,22 @@ def validate(cfg: DictConfig, planners=CONTINUOUS_PLANNERS, extra: list[str] | N
     for setting in cfg.settings:
         if setting not in SETTINGS:
             problems.append(f"unknown setting {setting!r} (settings: {list(SETTINGS)})")
-    if cfg.planner.name not in planners:
+    if "planner" in cfg and cfg.planner.name not in planners:
         problems.append(f"unknown planner {cfg.planner.name!r} ({', '.join(planners)})")
     for name, spec in {**cfg.eval.tasks, **(cfg.eval.generalization or {})}.items():
         kind = (spec or {}).get("task", name)
         if kind not in TASKS:
             problems.append(f"unknown task {kind!r} for {name!r} (tasks: {sorted(TASKS)})")
-    problems += check_positive({
-        "experts.steps_per_action": cfg.experts.steps_per_action,
-        "dynamics.num_transitions": cfg.dynamics.num_transitions, "dynamics.num_robots": cfg.dynamics.num_robots,
-        "dynamics.hidden": cfg.dynamics.hidden, "dynamics.episode_length": cfg.dynamics.episode_length,
-        "planner.num_candidates": cfg.planner.num_candidates, "planner.horizon": cfg.planner.horizon})
-    if not 0 < cfg.dynamics.holdout < 1:
-        problems.append(f"dynamics.holdout must be in (0, 1), got {cfg.dynamics.holdout}")
+    problems += check_positive({"experts.steps_per_action": cfg.experts.steps_per_action})
+    if "dynamics" in cfg:
+        problems += check_positive({
+            "dynamics.num_transitions": cfg.dynamics.num_transitions, "dynamics.num_robots": cfg.dynamics.num_robots,
+            "dynamics.hidden": cfg.dynamics.hidden, "dynamics.episode_length": cfg.dynamics.episode_length})
+        if not 0 < cfg.dynamics.holdout < 1:
+            problems.append(f"dynamics.holdout must be in (0, 1), got {cfg.dynamics.holdout}")
+    if "planner" in cfg:
+        problems += check_positive({"planner.num_candidates": cfg.planner.num_candidates,
+                                    "planner.horizon": cfg.planner.horizon})
     if cfg.device not in ("cpu", "cuda") and not str(cfg.device).startswith("cuda:"):
         problems.append(f"device must be cpu or cuda, got {cfg.device!r}")
     elif str(cfg.device).startswith("cuda") and not torch.cuda.is_available():
