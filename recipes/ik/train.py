@@ -9,7 +9,7 @@ Each stage is cached in the run directory with its config and reused when the co
 
 from __future__ import annotations
 
-import hierloco  # noqa: F401, I001  (first: headless MuJoCo rendering is set before anything loads MuJoCo)
+import hierloco  # noqa: F401  (first: headless MuJoCo rendering is set before anything loads MuJoCo)
 import sys
 from pathlib import Path
 

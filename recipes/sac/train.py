@@ -7,7 +7,7 @@ over z, trained on half of the task's targets and tested on all of them (and on 
 
 from __future__ import annotations
 
-import hierloco  # noqa: F401, I001  (first: headless MuJoCo rendering is set before anything loads MuJoCo)
+import hierloco  # noqa: F401  (first: headless MuJoCo rendering is set before anything loads MuJoCo)
 import sys
 import time
 from pathlib import Path
