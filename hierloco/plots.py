@@ -180,3 +180,24 @@ def plot_comparison(rows: Sequence[dict], path: str | os.PathLike, *, setting: s
     axes[0][0].legend()
     fig.suptitle(title or "comparison of methods")
     save_figure(fig, path)
+
+
+def plot_ablations(results: dict, path: str | os.PathLike, *, title: str | None = None) -> None:
+    """One panel per ablation: normalised cost (mean +- std over targets and trials) against the varied value, a
+    line per task. ``results`` maps an ablation name to ``{value: per-episode result rows}``."""
+    fig, axes = plt.subplots(1, len(results), figsize=(4.5 * len(results), 3.8), squeeze=False)
+    for ax, (name, by_value) in zip(axes[0], results.items()):
+        values = list(by_value)
+        tasks = sorted({r["task"] for rows in by_value.values() for r in rows})
+        for task in tasks:
+            costs = [[r["normalized_cost"] for r in by_value[v] if r["task"] == task] for v in values]
+            ax.errorbar(range(len(values)), [np.mean(c) for c in costs], yerr=[np.std(c) for c in costs],
+                        marker="o", capsize=3, label=task.replace("_", " "))
+        ax.set_xticks(range(len(values)), [str(v) for v in values])
+        ax.set_xlabel(name.replace("_", " "))
+        ax.set_ylabel("normalised cost")
+        ax.grid(alpha=0.3)
+    axes[0][0].legend(fontsize=8)
+    fig.suptitle(title or "ablations")
+    fig.tight_layout()
+    save_figure(fig, path)

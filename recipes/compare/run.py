@@ -10,24 +10,23 @@ finished runs are reused. Writes ``comparison.csv``, ``comparison.md`` and ``com
 
 from __future__ import annotations
 
-import subprocess
 import sys
 from pathlib import Path
 
 import hydra
 from omegaconf import DictConfig
 
-from hierloco.envs.robots import ROBOTS
-from hierloco.io import write_text
-from hierloco.plots import plot_comparison
-from hierloco.results import EPISODE_COLUMNS, csv_text, markdown_table, read_csv
-
-RECIPES = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from common import studies  # noqa: E402
+from hierloco.envs.robots import ROBOTS  # noqa: E402
+from hierloco.io import write_text  # noqa: E402
+from hierloco.plots import plot_comparison  # noqa: E402
+from hierloco.results import EPISODE_COLUMNS, csv_text, markdown_table  # noqa: E402
 
 
 def validate(cfg: DictConfig) -> None:
-    problems = [f"unknown method {m!r} (recipes: lat, lib, ik)" for m in cfg.methods
-                if not (RECIPES / m / "train.py").exists() or m in ("compare", "common")]
+    problems = [f"unknown method {m!r} (recipes: {', '.join(studies.METHODS)})" for m in cfg.methods
+                if m not in studies.METHODS]
     problems += [f"unknown robot {r!r} (registered: {sorted(ROBOTS)})" for r in cfg.robots if r not in ROBOTS]
     problems += [f"unknown setting {s!r}" for s in cfg.settings if s not in ("normal", "legs_disabled")]
     if not cfg.seeds:
@@ -36,16 +35,11 @@ def validate(cfg: DictConfig) -> None:
         raise ValueError("bad config:\n  " + "\n  ".join(problems))
 
 
-def run_method(cfg, method: str, robot: str, seed: int) -> Path:
+def run_method(cfg, method: str, robot: str, seed: int) -> list[dict]:
     settings = [s for s in cfg.settings if s == "normal" or method in cfg.adverse_methods]
     run_dir = Path("outputs") / method / cfg.preset / f"{robot}_seed{seed}"
-    command = [sys.executable, str(RECIPES / method / "train.py"), f"preset={cfg.preset}", f"robot={robot}",
-               f"seed={seed}", f"settings=[{','.join(settings)}]", f"run_dir={run_dir}", *cfg.overrides]
-    print(f"\n=== {method} on {robot}, seed {seed}: {' '.join(command[1:])}", flush=True)
-    result = subprocess.run(command)
-    if result.returncode != 0:
-        raise RuntimeError(f"{method} on {robot} (seed {seed}) failed with exit code {result.returncode}")
-    return run_dir
+    return studies.run_recipe(method, run_dir, [f"preset={cfg.preset}", f"robot={robot}", f"seed={seed}",
+                                                f"settings=[{','.join(settings)}]", *cfg.overrides])
 
 
 @hydra.main(config_path=".", config_name="config", version_base=None)
@@ -55,7 +49,7 @@ def main(cfg: DictConfig) -> None:
     for robot in cfg.robots:
         for method in cfg.methods:
             for seed in cfg.seeds:
-                rows += read_csv(run_method(cfg, method, robot, seed) / "episodes.csv")
+                rows += run_method(cfg, method, robot, seed)
     out = Path(cfg.out_dir)
     table = markdown_table(rows)
     write_text(out / "comparison.csv", csv_text(rows, EPISODE_COLUMNS))
