@@ -201,3 +201,36 @@ def plot_ablations(results: dict, path: str | os.PathLike, *, title: str | None 
     fig.suptitle(title or "ablations")
     fig.tight_layout()
     save_figure(fig, path)
+
+
+def plot_navigation(arena, planned_path: np.ndarray, com_path: np.ndarray | None, path: str | os.PathLike, *,
+                    inflation: float | None = None, title: str | None = None) -> None:
+    """Top view of a navigation arena: obstacles (and their inflation), the planned path and the CoM path."""
+    from matplotlib.patches import Polygon
+
+    fig, ax = plt.subplots(figsize=(6, 6))
+    for obstacle in arena.obstacles:
+        c, s = np.cos(obstacle.yaw), np.sin(obstacle.yaw)
+        hx, hy = obstacle.half_size[:2]
+        corners = np.array([[hx, hy], [-hx, hy], [-hx, -hy], [hx, -hy]]) @ np.array([[c, s], [-s, c]])
+        ax.add_patch(Polygon(corners + [obstacle.x, obstacle.y], color="#8c6d4f"))
+        if inflation:
+            grown = np.array([[hx + inflation, hy + inflation], [-hx - inflation, hy + inflation],
+                              [-hx - inflation, -hy - inflation], [hx + inflation, -hy - inflation]])
+            ax.add_patch(Polygon(grown @ np.array([[c, s], [-s, c]]) + [obstacle.x, obstacle.y], fill=False,
+                                 ls=":", color="#8c6d4f"))
+    ax.plot(planned_path[:, 0], planned_path[:, 1], "k--", lw=1.2, label="planned path")
+    if com_path is not None:
+        ax.plot(com_path[:, 0], com_path[:, 1], color="#d62728", lw=1.5, label="CoM")
+    ax.scatter(*arena.start, marker="o", color="k", zorder=3, label="start")
+    ax.scatter(*arena.goal, marker="*", s=160, color="#ffbf00", edgecolor="k", zorder=3, label="goal")
+    xmin, xmax, ymin, ymax = arena.bounds
+    ax.set_xlim(xmin, xmax)
+    ax.set_ylim(ymin, ymax)
+    ax.set_aspect("equal")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="best", fontsize=8)
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_title(title or "navigation")
+    save_figure(fig, path)

@@ -25,13 +25,14 @@ from hierloco.io import atomic_path
 
 def render_frames(robot: str | RobotSpec, qpos: np.ndarray, *, width: int = 320, height: int = 240,
                   distance: float | None = None, elevation: float = -25.0, azimuth: float = 135.0,
-                  disabled_legs: Sequence[str] = (), markers: np.ndarray | None = None) -> np.ndarray:
+                  disabled_legs: Sequence[str] = (), markers: np.ndarray | None = None,
+                  obstacles: Sequence = ()) -> np.ndarray:
     """Renders ``T x nq`` generalised positions with a camera tracking the base; returns ``T x H x W x 3`` uint8.
 
     ``markers`` (``M x 2``, world-frame XY in m) draws small spheres on the floor, e.g. goals or a path.
     """
     robot = get_robot(robot)
-    model = compile_model(robot, disabled_legs)
+    model = compile_model(robot, disabled_legs, obstacles)
     qpos = np.asarray(qpos, dtype=np.float64)
     if qpos.ndim != 2 or qpos.shape[1] != model.nq:
         raise ValueError(f"qpos must be T x {model.nq} for {robot.name}, got {qpos.shape}")

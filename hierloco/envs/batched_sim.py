@@ -80,20 +80,23 @@ class BatchedSimulator:
         robot: a registered robot name or a :class:`RobotSpec`.
         num_robots: B, the number of copies.
         disabled_legs: legs locked at their standing angles (their targets are ignored).
+        obstacles: static boxes in the world (:class:`hierloco.envs.robots.Obstacle`), e.g. a navigation arena.
         init_joint_noise: uniform noise in rad on the standing joint angles at reset.
         seed: seeds the reset noise.
         nthread: simulation threads (default: all cores).
     """
 
     def __init__(self, robot: str | RobotSpec, num_robots: int, *, disabled_legs: Sequence[str] = (),
-                 init_joint_noise: float = 0.0, seed: int | None = None, nthread: int | None = None):
+                 init_joint_noise: float = 0.0, seed: int | None = None, nthread: int | None = None,
+                 obstacles: Sequence = ()):
         if int(num_robots) < 1:
             raise ValueError(f"num_robots must be at least 1, got {num_robots}")
         self.robot = get_robot(robot)
         self.num_robots = int(num_robots)
         self.disabled_legs = tuple(disabled_legs)
         self.init_joint_noise = float(init_joint_noise)
-        self.model = compile_model(self.robot, self.disabled_legs)
+        self.obstacles = tuple(obstacles)
+        self.model = compile_model(self.robot, self.disabled_legs, self.obstacles)
         self.nthread = int(nthread) if nthread is not None else (os.cpu_count() or 1)
         self._datas = [mujoco.MjData(self.model) for _ in range(max(1, self.nthread))]
         self._pool = mj_rollout.Rollout(nthread=self.nthread if self.nthread > 1 else 0)

@@ -42,17 +42,19 @@ class LatentActionEnv(EnvBase):
             videos.
         seed: seeds the reset noise.
         nthread: simulation threads.
+        obstacles: static boxes in the world (a navigation arena).
     """
 
     def __init__(self, low_level: LowLevel, num_robots: int = 1, *, disabled_legs: Sequence[str] = (),
                  init_joint_noise: float = 0.02, record: bool = False, seed: int | None = None,
-                 nthread: int | None = None, device: str = "cpu"):
+                 nthread: int | None = None, obstacles: Sequence = (), device: str = "cpu"):
         super().__init__(batch_size=torch.Size([int(num_robots)]), device=device)
         self.low_level = low_level
         self.robot = low_level.robot
         self.record = record
         self.sim = BatchedSimulator(self.robot, int(num_robots), disabled_legs=disabled_legs,
-                                    init_joint_noise=init_joint_noise, seed=seed, nthread=nthread)
+                                    init_joint_noise=init_joint_noise, seed=seed, nthread=nthread,
+                                    obstacles=obstacles)
         self.steps_per_action = low_level.steps_per_action
         b = int(num_robots)
         observation = {"com_state": Unbounded((b, 5), device=self.device),

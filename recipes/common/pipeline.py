@@ -96,6 +96,11 @@ def validate(cfg: DictConfig, planners=CONTINUOUS_PLANNERS, extra: list[str] | N
         raise ValueError("bad config:\n  " + "\n  ".join(problems))
 
 
+def eval_section(cfg) -> dict:
+    """What the evaluation's numbers depend on: the ``eval`` section without its figure and video switches."""
+    return {k: v for k, v in section(cfg, "eval").items() if k not in ("figures", "videos")}
+
+
 def disabled_legs(cfg, setting) -> tuple[str, ...]:
     return get_robot(cfg.robot).rear_legs if setting == "legs_disabled" else ()
 
@@ -310,7 +315,7 @@ def run_pipeline(cfg: DictConfig, method: str, prepare: Callable) -> str:
         for name, rmse in zip(("dx", "dy", "dyaw", "vx", "vy"), model.metadata["heldout_rmse"]):
             logger.log_scalar(f"train/dynamics_{setting}/heldout_rmse_{name}", rmse)
         eval_config = {"dynamics": dynamics_config(cfg, low_level, setting), "planner": section(cfg, "planner"),
-                       "eval": section(cfg, "eval")}
+                       "eval": eval_section(cfg)}
         episodes += run.stage(f"evaluation_{setting}", eval_config,
                               lambda: evaluate(cfg, run, method, low_level, model, setting, logger),
                               save_json, load_json, f"evaluation_{setting}.json")

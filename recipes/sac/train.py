@@ -40,7 +40,7 @@ def main(cfg: DictConfig) -> None:
         agent, reports[f"sac_{name}"] = trained
         # every task of the same kind (the main one and its generalisation variants) with this policy
         same_kind = [n for n, t in tasks.items() if type(t) is type(task)]
-        eval_config = {"agent": config, "eval": pipeline.section(cfg, "eval"), "tasks": same_kind}
+        eval_config = {"agent": config, "eval": pipeline.eval_section(cfg), "tasks": same_kind}
         episodes += run.stage(f"evaluation_{name}", eval_config,
                               lambda: [row for n in same_kind
                                        for row in utils.evaluate_sac(cfg, run, agent, low_level, n, tasks[n], logger)],

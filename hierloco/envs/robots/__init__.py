@@ -13,6 +13,7 @@ from hierloco.envs.robots.spec import (
     PHYSICS_TIMESTEP,
     START_YAW,
     Leg,
+    Obstacle,
     RobotSpec,
     compile_model,
     joint_qpos_indices,
@@ -42,7 +43,7 @@ register_robot(A1)
 register_robot(DAISY)
 
 __all__ = [
-    "A1", "DAISY", "ROBOTS", "CONTROL_TIMESTEP", "LOCK_PREFIX", "TOUCH_SENSOR_PREFIX", "PHYSICS_STEPS_PER_CONTROL", "PHYSICS_TIMESTEP", "START_YAW", "Leg",
-    "RobotSpec", "compile_model", "get_robot", "joint_qpos_indices", "joint_qvel_indices", "register_robot",
-    "robot_from_mjcf", "standing_qpos",
+    "A1", "DAISY", "ROBOTS", "CONTROL_TIMESTEP", "LOCK_PREFIX", "TOUCH_SENSOR_PREFIX", "PHYSICS_STEPS_PER_CONTROL",
+    "PHYSICS_TIMESTEP", "START_YAW", "Leg", "Obstacle", "RobotSpec", "compile_model", "get_robot",
+    "joint_qpos_indices", "joint_qvel_indices", "register_robot", "robot_from_mjcf", "standing_qpos",
 ]

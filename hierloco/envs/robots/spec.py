@@ -148,8 +148,21 @@ class RobotSpec:
         return dataclasses.replace(self, **changes)
 
 
-def compile_model(robot: RobotSpec, disabled_legs: Sequence[str] = ()) -> mujoco.MjModel:
-    """Build the simulation model of ``robot`` with the legs in ``disabled_legs`` locked at their standing angles.
+@dataclass(frozen=True)
+class Obstacle:
+    """A box standing on the floor: centre ``(x, y)`` in m, half-sizes ``(hx, hy, hz)`` in m, heading ``yaw`` in
+    rad."""
+
+    x: float
+    y: float
+    half_size: tuple[float, float, float]
+    yaw: float = 0.0
+
+
+def compile_model(robot: RobotSpec, disabled_legs: Sequence[str] = (),
+                  obstacles: Sequence[Obstacle] = ()) -> mujoco.MjModel:
+    """Build the simulation model of ``robot`` with the legs in ``disabled_legs`` locked at their standing angles,
+    in a world with static ``obstacles`` (an arena).
 
     Returns a :class:`mujoco.MjModel` whose ``nu`` actuators are position servos on ``robot.joint_names`` in that
     order, with one touch sensor per foot (in leg order) and nothing else in ``sensordata``.
@@ -169,6 +182,11 @@ def compile_model(robot: RobotSpec, disabled_legs: Sequence[str] = ()) -> mujoco
             raise ValueError(f"robot {robot.name!r}: base body {robot.base_body!r} is not a child of the world")
         base.add_freejoint(name=f"{robot.base_body}_root")
     _ensure_floor(spec)
+    for i, obstacle in enumerate(obstacles):
+        spec.worldbody.add_geom(name=f"obstacle_{i}", type=mujoco.mjtGeom.mjGEOM_BOX, size=obstacle.half_size,
+                                pos=[obstacle.x, obstacle.y, obstacle.half_size[2]],
+                                quat=[np.cos(obstacle.yaw / 2), 0, 0, np.sin(obstacle.yaw / 2)],
+                                rgba=[0.55, 0.45, 0.35, 1], contype=1, conaffinity=1)
     _set_actuators(spec, robot)
     _add_foot_sensors(spec, robot)
     _add_joint_locks(spec, robot, disabled)

@@ -1,0 +1,147 @@
+"""Navigation: a cluttered arena of boxes, a collision-free path from a grid planner, and clearance checks (SPEC 8).
+
+The path is planned with A* on an occupancy grid whose obstacles are inflated by the robot's footprint radius,
+shortened by line-of-sight shortcuts and resampled evenly; a :class:`hierloco.envs.tasks.TrajectoryTracking` over
+it makes the robot follow it with MPC.
+
+Example:
+    >>> arena = cluttered_arena(seed=0)
+    >>> path = plan_path(arena, inflation=0.35)  # P x 2 world-frame points, m
+    >>> bool(clearance(arena, path).min() >= 0.35 - 0.05)  # at least the inflation, to the grid resolution
+    True
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from hierloco.envs.robots import Obstacle
+
+
+@dataclass(frozen=True)
+class Arena:
+    """Static box obstacles, a start and a goal (m, world frame), inside ``bounds`` ``(xmin, xmax, ymin, ymax)``."""
+
+    obstacles: tuple[Obstacle, ...]
+    start: tuple[float, float]
+    goal: tuple[float, float]
+    bounds: tuple[float, float, float, float]
+
+
+def cluttered_arena(seed: int = 0, num_obstacles: int = 10, goal: tuple[float, float] = (3.0, 4.0),
+                    margin: float = 1.0, keep_clear: float = 0.7, max_half_size: float = 0.4) -> Arena:
+    """Random boxes scattered about the straight line from the start (the origin) to ``goal`` (so that the path
+    has to weave between them), none within ``keep_clear`` m of either end."""
+    if num_obstacles < 0 or not keep_clear > 0:
+        raise ValueError("need num_obstacles >= 0 and keep_clear > 0")
+    rng = np.random.default_rng(seed)
+    start = (0.0, 0.0)
+    bounds = (min(start[0], goal[0]) - margin, max(start[0], goal[0]) + margin,
+              min(start[1], goal[1]) - margin, max(start[1], goal[1]) + margin)
+    obstacles: list[Obstacle] = []
+    attempts = 0
+    while len(obstacles) < num_obstacles and attempts < 1000 * max(1, num_obstacles):
+        attempts += 1
+        half = (float(rng.uniform(0.1, max_half_size)), float(rng.uniform(0.1, max_half_size)), 0.25)
+        along, across = rng.uniform(0.1, 0.9), rng.uniform(-1.2, 1.2)
+        direction = np.subtract(goal, start) / max(1e-9, float(np.linalg.norm(np.subtract(goal, start))))
+        x, y = np.add(start, along * np.subtract(goal, start)) + across * np.array([-direction[1], direction[0]])
+        candidate = Obstacle(float(x), float(y), half, float(rng.uniform(-math.pi, math.pi)))
+        points = np.array([start, goal], dtype=float)
+        if np.all(_box_distance(candidate, points) > keep_clear):
+            obstacles.append(candidate)
+    return Arena(tuple(obstacles), start, (float(goal[0]), float(goal[1])), bounds)
+
+
+def _box_distance(obstacle: Obstacle, points: np.ndarray) -> np.ndarray:
+    """Signed distance (m) from ``... x 2`` points to the box footprint (negative inside)."""
+    c, s = math.cos(obstacle.yaw), math.sin(obstacle.yaw)
+    d = points - np.array([obstacle.x, obstacle.y])
+    local = np.stack([c * d[..., 0] + s * d[..., 1], -s * d[..., 0] + c * d[..., 1]], -1)
+    q = np.abs(local) - np.array(obstacle.half_size[:2])
+    outside = np.linalg.norm(np.maximum(q, 0.0), axis=-1)
+    inside = np.minimum(np.max(q, axis=-1), 0.0)
+    return outside + inside
+
+
+def clearance(arena: Arena, points: np.ndarray) -> np.ndarray:
+    """Distance (m) from ``... x 2`` points to the nearest obstacle footprint (negative inside one; inf if none)."""
+    points = np.asarray(points, dtype=float)
+    if not arena.obstacles:
+        return np.full(points.shape[:-1], np.inf)
+    return np.min([_box_distance(o, points) for o in arena.obstacles], axis=0)
+
+
+def plan_path(arena: Arena, *, inflation: float = 0.35, resolution: float = 0.05, spacing: float = 0.05
+              ) -> np.ndarray:
+    """A collision-free path from start to goal (``P x 2``, m) keeping ``inflation`` m from every obstacle.
+
+    A* over an 8-connected occupancy grid of ``resolution`` m, then line-of-sight shortcuts, then points every
+    ``spacing`` m. Raises ``ValueError`` when no path exists.
+    """
+    xmin, xmax, ymin, ymax = arena.bounds
+    xs = np.arange(xmin, xmax + 1e-9, resolution)
+    ys = np.arange(ymin, ymax + 1e-9, resolution)
+    grid_points = np.stack(np.meshgrid(xs, ys, indexing="ij"), -1)
+    free = clearance(arena, grid_points) > inflation
+
+    def cell(point):
+        return (int(round((point[0] - xmin) / resolution)), int(round((point[1] - ymin) / resolution)))
+
+    start, goal = cell(arena.start), cell(arena.goal)
+    for name, c in (("start", start), ("goal", goal)):
+        if not (0 <= c[0] < free.shape[0] and 0 <= c[1] < free.shape[1]) or not free[c]:
+            raise ValueError(f"the {name} is inside an (inflated) obstacle or outside the arena")
+    cells = _astar(free, start, goal)
+    waypoints = [cells[0]]
+    i = 0
+    while i < len(cells) - 1:  # shortcut: jump to the farthest cell in line of sight
+        j = len(cells) - 1
+        while j > i + 1 and not _line_free(free, cells[i], cells[j]):
+            j -= 1
+        waypoints.append(cells[j])
+        i = j
+    corners = np.array([[xmin + a * resolution, ymin + b * resolution] for a, b in waypoints])
+    corners[0], corners[-1] = arena.start, arena.goal
+    segments = [np.linspace(p, q, max(2, int(np.ceil(np.linalg.norm(q - p) / spacing)) + 1))[:-1]
+                for p, q in zip(corners[:-1], corners[1:])]
+    return np.concatenate(segments + [corners[-1:]])
+
+
+def _astar(free: np.ndarray, start: tuple[int, int], goal: tuple[int, int]) -> list[tuple[int, int]]:
+    moves = [(dx, dy, math.hypot(dx, dy)) for dx in (-1, 0, 1) for dy in (-1, 0, 1) if dx or dy]
+
+    def heuristic(c):
+        dx, dy = abs(c[0] - goal[0]), abs(c[1] - goal[1])
+        return max(dx, dy) + (math.sqrt(2) - 1) * min(dx, dy)
+
+    frontier = [(heuristic(start), 0.0, start)]
+    cost, parent = {start: 0.0}, {start: None}
+    while frontier:
+        _, g, current = heapq.heappop(frontier)
+        if current == goal:
+            path = [current]
+            while parent[path[-1]] is not None:
+                path.append(parent[path[-1]])
+            return path[::-1]
+        if g > cost[current]:
+            continue
+        for dx, dy, step in moves:
+            nxt = (current[0] + dx, current[1] + dy)
+            if not (0 <= nxt[0] < free.shape[0] and 0 <= nxt[1] < free.shape[1]) or not free[nxt]:
+                continue
+            new_cost = g + step
+            if new_cost < cost.get(nxt, math.inf):
+                cost[nxt], parent[nxt] = new_cost, current
+                heapq.heappush(frontier, (new_cost + heuristic(nxt), new_cost, nxt))
+    raise ValueError("no collision-free path from start to goal in this arena")
+
+
+def _line_free(free: np.ndarray, a: tuple[int, int], b: tuple[int, int]) -> bool:
+    steps = int(max(abs(b[0] - a[0]), abs(b[1] - a[1]))) * 2 + 1
+    line = np.rint(np.linspace(a, b, steps)).astype(int)
+    return bool(np.all(free[line[:, 0], line[:, 1]]))

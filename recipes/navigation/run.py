@@ -1,0 +1,88 @@
+"""Navigation in a cluttered arena: plan a collision-free path, then follow it with LAT (SPEC 8).
+
+    python recipes/navigation/run.py                     # A1, the paper-scale LAT run (trained first if needed)
+    python recipes/navigation/run.py robot=daisy arena.seed=2 arena.num_obstacles=14
+
+Writes ``navigation.json`` (tracking cost, distance to the path, clearance from the obstacles, goal reached),
+``navigation.png`` (arena, planned path, CoM path) and ``navigation.mp4`` in ``out_dir``.
+"""
+
+from __future__ import annotations
+
+import hierloco  # noqa: F401  (first: headless MuJoCo rendering is set before anything loads MuJoCo)
+import json
+import sys
+from pathlib import Path
+
+import hydra
+import numpy as np
+from omegaconf import DictConfig
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from common import studies  # noqa: E402
+from hierloco.components.com_model import TrainedCoMModel  # noqa: E402
+from hierloco.components.evaluation import run_task  # noqa: E402
+from hierloco.components.gait_policy import TrainedGaitPolicy  # noqa: E402
+from hierloco.components.low_level import LatentLowLevel  # noqa: E402
+from hierloco.components.planners import RandomShootingPlanner  # noqa: E402
+from hierloco.envs.latent_env import LatentActionEnv  # noqa: E402
+from hierloco.envs.navigation import clearance, cluttered_arena, plan_path  # noqa: E402
+from hierloco.envs.robots import ROBOTS  # noqa: E402
+from hierloco.envs.tasks import TrajectoryTracking  # noqa: E402
+from hierloco.envs.world_model import CoMWorldModelEnv  # noqa: E402
+from hierloco.io import write_text  # noqa: E402
+from hierloco.plots import plot_navigation  # noqa: E402
+from hierloco.render import render_frames, save_video  # noqa: E402
+
+
+def validate(cfg: DictConfig) -> None:
+    problems = [] if cfg.robot in ROBOTS else [f"unknown robot {cfg.robot!r} (registered: {sorted(ROBOTS)})"]
+    if not (cfg.inflation >= 0 and cfg.speed > 0 and cfg.arena.num_obstacles >= 0):
+        problems.append("need inflation >= 0 m, speed > 0 m/s and arena.num_obstacles >= 0")
+    if problems:
+        raise ValueError("bad config:\n  " + "\n  ".join(problems))
+
+
+@hydra.main(config_path=".", config_name="config", version_base=None)
+def main(cfg: DictConfig) -> None:
+    validate(cfg)
+    arena = cluttered_arena(seed=cfg.arena.seed, num_obstacles=cfg.arena.num_obstacles, goal=tuple(cfg.arena.goal))
+    path = plan_path(arena, inflation=cfg.inflation)  # before any training: an impossible arena fails fast
+    lat_dir = Path(cfg.lat_run_dir)
+    studies.run_recipe("lat", lat_dir, [f"preset={cfg.lat_preset}", f"robot={cfg.robot}", f"seed={cfg.seed}",
+                                        f"progress={str(cfg.progress).lower()}"])
+    trained = TrainedGaitPolicy.load(lat_dir / "gait_policy.pt")
+    model = TrainedCoMModel.load(lat_dir / "dynamics_model_normal.pt")
+    low_level = LatentLowLevel(trained, cfg.robot)
+    world_model = CoMWorldModelEnv(model.model.eval(), action_low=low_level.action_low,
+                                   action_high=low_level.action_high)
+    planner = RandomShootingPlanner(world_model, planning_horizon=cfg.planner.horizon,
+                                    num_candidates=cfg.planner.num_candidates, seed=cfg.seed)
+    task = TrajectoryTracking(path=path, speed=cfg.speed, extra_steps=cfg.extra_steps)
+    task.name = "navigation"
+    env = LatentActionEnv(low_level, num_robots=1, record=True, seed=cfg.seed, obstacles=arena.obstacles)
+    rollout = run_task(env, planner, task, progress=cfg.progress)
+    env.close()
+    com = rollout.com_paths[0, :, :2]
+    result = {"robot": cfg.robot, "seed": cfg.seed, "arena_seed": cfg.arena.seed,
+              "num_obstacles": len(arena.obstacles), "path_length": task.length,
+              "normalized_cost": float(rollout.result.normalized_cost[0]),
+              "mean_path_distance": float(task.path_distance(com).mean()),
+              "final_distance_to_goal": float(np.linalg.norm(com[-1] - np.asarray(arena.goal))),
+              "goal_reached": bool(np.linalg.norm(com[-1] - np.asarray(arena.goal)) <= 0.2),
+              "min_planned_clearance": float(clearance(arena, path).min()),
+              "min_com_clearance": float(clearance(arena, com).min()), "fell": bool(rollout.fell[0])}
+    out = Path(cfg.out_dir)
+    write_text(out / "navigation.json", json.dumps(result, indent=2))
+    plot_navigation(arena, path, com, out / "navigation.png", inflation=cfg.inflation,
+                    title=f"LAT {cfg.robot}: navigation (arena {cfg.arena.seed})")
+    if cfg.video:
+        frames = render_frames(cfg.robot, rollout.qpos[0, ::5], obstacles=arena.obstacles,
+                               markers=path[:: max(1, len(path) // 40)], distance=3.0, elevation=-45)
+        save_video(frames, out / "navigation.mp4", fps=20)
+    print(json.dumps(result, indent=2))
+    print(f"navigation results, figure and video in {out}/")
+
+
+if __name__ == "__main__":
+    main()
