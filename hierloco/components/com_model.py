@@ -54,6 +54,17 @@ def _check_last_dim(name: str, tensor: torch.Tensor, size: int) -> None:
         raise ValueError(f"{name} must have a last dimension of {size}, got shape {tuple(tensor.shape)}")
 
 
+def _five_vectors(**arrays) -> list[torch.Tensor]:
+    """The named ``... x 5`` arrays as float tensors of one common dtype (a bad shape names the argument)."""
+    tensors = []
+    for name, value in arrays.items():
+        tensor = _as_float_tensor(value)
+        _check_last_dim(name, tensor, 5)
+        tensors.append(tensor)
+    dtype = torch.promote_types(tensors[0].dtype, tensors[1].dtype)
+    return [t.to(dtype) for t in tensors]
+
+
 def local_transition(com_state, next_com_state) -> tuple[torch.Tensor, torch.Tensor]:
     """World-frame CoM state pairs -> the model's input velocity and target delta.
 
@@ -74,11 +85,7 @@ def local_transition(com_state, next_com_state) -> tuple[torch.Tensor, torch.Ten
         >>> (v.round(decimals=4) + 0).tolist(), (delta.round(decimals=4) + 0).tolist()
         ([1.0, 0.0], [1.0, 0.0, 0.1, 1.0, 0.5])
     """
-    state, next_state = _as_float_tensor(com_state), _as_float_tensor(next_com_state)
-    _check_last_dim("com_state", state, 5)
-    _check_last_dim("next_com_state", next_state, 5)
-    dtype = torch.promote_types(state.dtype, next_state.dtype)
-    state, next_state = state.to(dtype), next_state.to(dtype)
+    state, next_state = _five_vectors(com_state=com_state, next_com_state=next_com_state)
     yaw = state[..., 2]
     velocity_local = world_to_local(state[..., 3:5], yaw)
     displacement = world_to_local(next_state[..., :2] - state[..., :2], yaw)
@@ -94,11 +101,7 @@ def apply_delta(com_state, delta) -> torch.Tensor:
     wrapped to (-pi, pi]. Leading dimensions broadcast (a ``B x 1 x 5`` state with ``B x S x 5`` deltas gives
     ``B x S x 5``).
     """
-    state, delta = _as_float_tensor(com_state), _as_float_tensor(delta)
-    _check_last_dim("com_state", state, 5)
-    _check_last_dim("delta", delta, 5)
-    dtype = torch.promote_types(state.dtype, delta.dtype)
-    state, delta = state.to(dtype), delta.to(dtype)
+    state, delta = _five_vectors(com_state=com_state, delta=delta)
     yaw = state[..., 2]
     position = state[..., :2] + local_to_world(delta[..., :2], yaw)
     next_yaw = wrap_angle(yaw + delta[..., 2])

@@ -13,19 +13,10 @@ import hierloco  # noqa: F401  (first: headless MuJoCo rendering is set before a
 import sys
 from pathlib import Path
 
-import hydra
-from omegaconf import DictConfig
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from common.entry import model_based_main  # noqa: E402  (the pipeline shared by LAT, LIB and IK)
 
-sys.path[:0] = [str(Path(__file__).resolve().parent), str(Path(__file__).resolve().parents[1])]
-import utils  # noqa: E402  (this recipe's factories)
-from common import pipeline  # noqa: E402  (the model-based pipeline shared by LAT, LIB and IK)
-
-
-@hydra.main(config_path=".", config_name="config", version_base=None)
-def main(cfg: DictConfig) -> None:
-    utils.validate(cfg)
-    pipeline.run_pipeline(cfg, utils.METHOD, utils.prepare)
-
+main = model_based_main(__file__)  # Hydra over this folder's config.yaml, with this folder's utils.py
 
 if __name__ == "__main__":
     main()
