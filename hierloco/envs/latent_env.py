@@ -16,7 +16,7 @@ Example:
 
 from __future__ import annotations
 
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 import torch
@@ -24,9 +24,11 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
-from hierloco.components.low_level import LowLevel
 from hierloco.envs.batched_sim import BatchedSimulator
 from hierloco.envs.frames import world_to_local
+
+if TYPE_CHECKING:  # the env runs any low level; hierloco.envs does not import hierloco.components
+    from hierloco.components.low_level import LowLevel
 
 
 class LatentActionEnv(EnvBase):
@@ -45,7 +47,7 @@ class LatentActionEnv(EnvBase):
         obstacles: static boxes in the world (a navigation arena).
     """
 
-    def __init__(self, low_level: LowLevel, num_robots: int = 1, *, disabled_legs: Sequence[str] = (),
+    def __init__(self, low_level: "LowLevel", num_robots: int = 1, *, disabled_legs: Sequence[str] = (),
                  init_joint_noise: float = 0.02, record: bool = False, seed: int | None = None,
                  nthread: int | None = None, obstacles: Sequence = (), device: str = "cpu"):
         super().__init__(batch_size=torch.Size([int(num_robots)]), device=device)
