@@ -41,9 +41,9 @@ def render_frames(robot: str | RobotSpec, qpos: np.ndarray, *, width: int = 320,
     model.vis.global_.offwidth = max(model.vis.global_.offwidth, width)
     model.vis.global_.offheight = max(model.vis.global_.offheight, height)
     data = mujoco.MjData(model)
+    base = model.body(robot.base_body).id
     camera = mujoco.MjvCamera()
-    camera.type = mujoco.mjtCamera.mjCAMERA_TRACKING
-    camera.trackbodyid = model.body(robot.base_body).id
+    camera.type = mujoco.mjtCamera.mjCAMERA_FREE  # looking at the base, moved with it every frame
     camera.distance = distance if distance is not None else 6.0 * robot.standing_height + 0.5
     camera.elevation, camera.azimuth = elevation, azimuth
     frames = np.empty((len(qpos), height, width, 3), dtype=np.uint8)
@@ -51,6 +51,7 @@ def render_frames(robot: str | RobotSpec, qpos: np.ndarray, *, width: int = 320,
         for t, q in enumerate(qpos):
             data.qpos[:] = q
             mujoco.mj_kinematics(model, data)
+            camera.lookat[:] = data.xpos[base]
             renderer.update_scene(data, camera=camera)
             if markers is not None:
                 _add_markers(renderer.scene, np.asarray(markers))

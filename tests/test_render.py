@@ -44,3 +44,13 @@ def test_bad_input_is_refused(walking_qpos, tmp_path):
         render_frames("daisy", walking_qpos[:, :5])
     with pytest.raises(ValueError, match="uint8"):
         save_video(np.zeros((2, 8, 8, 3)), tmp_path / "x.mp4")
+
+
+def test_camera_follows_the_robot(walking_qpos):
+    """Far from the origin the robot is still in the middle of the picture: its pixels differ from an empty floor."""
+    far = walking_qpos[:1].copy()
+    far[0, :2] += [5.0, -3.0]
+    frames = render_frames("daisy", np.concatenate([walking_qpos[:1], far]), width=160, height=120)
+    centre = (slice(40, 80), slice(55, 105))
+    np.testing.assert_allclose(frames[1][centre].mean(), frames[0][centre].mean(), atol=12)
+    assert frames[1][centre].std() > 15, "the robot, not bare floor, is in the centre of the picture"
