@@ -12,3 +12,13 @@ if os.environ["MUJOCO_GL"] in ("egl", "osmesa"):
     os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
 
 __version__ = "0.1.0"
+
+
+def load_run(run_dir):
+    """The trained parts of a recipe's run directory: see :func:`hierloco.trained.load_run`."""
+    from hierloco.trained import load_run as _load_run
+
+    return _load_run(run_dir)
+
+
+__all__ = ["__version__", "load_run"]

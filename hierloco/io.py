@@ -15,6 +15,7 @@ Example:
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import tempfile
@@ -83,8 +84,10 @@ def save_checkpoint(path: str | os.PathLike, kind: str, version: int, payload: M
     """Saves a torch checkpoint tagged with its ``kind`` and format ``version``, atomically."""
     import torch
 
+    buffer = io.BytesIO()  # torch names the archive after the file: save to memory so the bytes never depend on it
+    torch.save({**payload, "kind": kind, "format": version}, buffer)
     with atomic_path(path) as tmp:
-        torch.save({**payload, "kind": kind, "format": version}, tmp)
+        Path(tmp).write_bytes(buffer.getvalue())
 
 
 def load_checkpoint(path: str | os.PathLike, kind: str, version: int, map_location="cpu") -> dict:
@@ -102,3 +105,46 @@ def load_checkpoint(path: str | os.PathLike, kind: str, version: int, map_locati
     if not isinstance(payload, dict) or payload.get("kind") != kind or payload.get("format") != version:
         raise ArtifactError(f"{path} is not a {description} checkpoint of format {version}")
     return payload
+
+
+def save_json(path: str | os.PathLike, obj: Any) -> None:
+    """Writes ``obj`` as JSON to ``path`` atomically (NumPy scalars and arrays become numbers and lists)."""
+    def default(value):
+        if isinstance(value, (np.generic, np.ndarray)):
+            return value.tolist()
+        raise TypeError(f"{type(value).__name__} is not JSON-serialisable")
+
+    write_text(path, json.dumps(obj, indent=1, default=default))
+
+
+def check_schema(obj: Any, schema: Mapping[str, Any], where: str) -> None:
+    """Checks that ``obj`` is a dict holding every key of ``schema`` with a value of the given type (a type, a
+    tuple of types, or a nested schema dict); raises :class:`ArtifactError` naming ``where`` and the key."""
+    if not isinstance(obj, dict):
+        raise ArtifactError(f"{where}: expected a JSON object, got {type(obj).__name__}")
+    for key, kind in schema.items():
+        if key not in obj:
+            raise ArtifactError(f"{where}: missing {key!r}")
+        if isinstance(kind, Mapping):
+            check_schema(obj[key], kind, f"{where}[{key!r}]")
+            continue
+        kinds = kind if isinstance(kind, tuple) else (kind,)
+        value = obj[key]
+        if not isinstance(value, kinds) or (isinstance(value, bool) and bool not in kinds):  # True is not a number
+            raise ArtifactError(f"{where}: {key!r} should be {getattr(kind, '__name__', kind)}, got "
+                                f"{type(obj[key]).__name__}")
+
+
+def load_json(path: str | os.PathLike, schema: Mapping[str, Any] | None = None) -> Any:
+    """Reads a JSON artifact and checks it against ``schema`` (see :func:`check_schema`); a missing, unreadable or
+    malformed file raises :class:`ArtifactError` naming it."""
+    path = Path(path)
+    try:
+        obj = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise ArtifactError(f"no such artifact: {path}") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as error:
+        raise ArtifactError(f"corrupted artifact {path}: {error}") from error
+    if schema is not None:
+        check_schema(obj, schema, f"corrupted artifact {path}")
+    return obj

@@ -30,7 +30,8 @@ class RunLogger:
     """
 
     def __init__(self, exp_name: str, log_dir: str | os.PathLike, *, backends: Iterable[str] = ("csv", "wandb"),
-                 project: str = "hierloco", wandb_mode: str = "offline", config: Mapping | None = None):
+                 project: str = "hierloco", wandb_mode: str = "offline", config: Mapping | None = None,
+                 group: str | None = None, tags=None):
         backends = set(backends) | {"csv"}
         unknown = backends - set(BACKENDS)
         if unknown:
@@ -49,6 +50,26 @@ class RunLogger:
         if config:
             for logger in self.loggers[:1]:
                 logger.log_hparams(dict(config))
+
+    @classmethod
+    def null(cls) -> "RunLogger":
+        logger = cls.__new__(cls)
+        logger.loggers = []
+        return logger
+
+    def log_curve(self, prefix, curves, step_name="step"):
+        for name, values in curves.items():
+            for step, value in enumerate(values, 1):
+                self.log_scalar(f"{prefix}/{name}", value, step=step)
+
+    def log_image(self, name, path):
+        pass
+
+    def log_table(self, name, rows):
+        pass
+
+    def summary(self, values):
+        pass
 
     def log_scalar(self, name: str, value: float, step: int = 0) -> None:
         for logger in self.loggers:

@@ -22,7 +22,9 @@ from typing import Iterable, Mapping
 
 import numpy as np
 
-from hierloco.io import write_text
+from dataclasses import dataclass, field
+
+from hierloco.io import ArtifactError, check_schema, load_arrays, save_arrays, write_text
 
 RESULT_COLUMNS = ["method", "robot", "setting", "task", "seed", "normalized_cost", "success_rate", "final_error"]
 EPISODE_COLUMNS = ["method", "robot", "setting", "task", "seed", "episode", "normalized_cost", "success",
@@ -111,3 +113,48 @@ def write_results(run_dir: str | os.PathLike, episodes: list[dict], extra_markdo
                                        "standing still (1 = no better than standing, 0 = perfect); mean +- std "
                                        "over targets and seeds.\n\n" + table + extra_markdown)
     return table
+
+
+EVALUATION_FORMAT = 1
+RECORDING_KEYS = ("com_paths", "foot_contacts", "qpos")
+
+
+@dataclass
+class TaskEvaluation:
+    """One evaluated task: per-episode result rows, summary metrics, and what its episodes recorded.
+
+    Attributes:
+        rows: one dict per episode with the columns of :data:`EPISODE_COLUMNS`.
+        metrics: named summary numbers (``normalized_cost``, ``success_rate``, ``cost_<term>``, ...).
+        recording: ``com_paths`` (``E x (T * N) x 5`` world CoM states at 100 Hz), ``foot_contacts``
+            (``E x (T * N) x L``), ``qpos`` (``1 x (T * N) x nq``, the first episode, for videos); any may be absent.
+        metadata: what was evaluated (task, setting, method, robot, seed).
+    """
+
+    rows: list
+    metrics: dict
+    recording: dict = field(default_factory=dict)
+    metadata: dict = field(default_factory=dict)
+
+    def save(self, path: str | os.PathLike) -> None:
+        save_arrays(path, {k: v for k, v in self.recording.items() if v is not None},
+                    {"kind": "task_evaluation", "format": EVALUATION_FORMAT, "rows": self.rows,
+                     "metrics": self.metrics, "metadata": self.metadata})
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> "TaskEvaluation":
+        """Reads and validates an evaluation; a malformed one raises :class:`ArtifactError` naming the file."""
+        arrays, meta = load_arrays(path)
+        where = f"corrupted evaluation {path}"
+        check_schema(meta, {"kind": str, "format": int, "rows": list, "metrics": dict, "metadata": dict}, where)
+        if meta["kind"] != "task_evaluation" or meta["format"] != EVALUATION_FORMAT:
+            raise ArtifactError(f"{path} is not a task evaluation of format {EVALUATION_FORMAT}")
+        if not meta["rows"]:
+            raise ArtifactError(f"{where}: no episodes")
+        for row in meta["rows"]:
+            check_schema(row, {"method": str, "robot": str, "setting": str, "task": str, "seed": int, "episode": int,
+                               "normalized_cost": (int, float), "success": (int, float),
+                               "final_error": (int, float)}, where)
+        if set(arrays) - set(RECORDING_KEYS):
+            raise ArtifactError(f"{where}: unexpected arrays {sorted(set(arrays) - set(RECORDING_KEYS))}")
+        return cls(meta["rows"], meta["metrics"], arrays, meta["metadata"])

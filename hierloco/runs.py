@@ -1,10 +1,16 @@
-"""Run directories: each pipeline stage's artifact is cached with the config that made it (SPEC 9).
+"""Run directories: each pipeline stage's artifact is cached beside the key that made it, under a lock.
 
-``RunDirectory.stage(name, config, build, save, load)`` returns the stage's result: loaded from disk when the
-artifact exists and was made with the same config, built (then saved atomically, config first) otherwise. An
-artifact made with a different config is never overwritten: the run stops with an error that names the
-differences, before any work. A killed run therefore resumes at its first unfinished stage, losing no finished
-stage.
+A stage is named, has a *key* (a JSON-able dict of everything that changes its artifact: config values, the robot's
+fingerprint, the digests of the stages it depends on) and a file. ``RunDirectory.stage(name, key, build, save, load,
+filename)`` returns the stage's result: loaded from disk when the artifact exists and was made with the same key,
+built (then saved atomically, key first) otherwise. An artifact made with another key is never overwritten: the run
+stops with an error naming the differences. :meth:`RunDirectory.verify` checks a whole plan of stages this way before
+any work, so a refused run writes nothing. A killed run resumes at its first unfinished stage.
+
+One process at a time writes a run directory: :meth:`RunDirectory.acquire` takes an exclusive ``flock`` on
+``.lock`` (the kernel releases it when the holder dies, so a killed run's lock is taken over) and a second process is
+refused at once with a message naming the holder. A directory the process may not write is opened read-only: every
+stage must then be finished, and nothing is written.
 
 Example:
     >>> import json, tempfile
@@ -20,21 +26,35 @@ Example:
 
 from __future__ import annotations
 
+import fcntl
+import hashlib
 import json
 import os
+import socket
+import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, TypeVar
+from typing import Any, Callable, Iterable, TypeVar
 
 import numpy as np
 
 from hierloco.io import ArtifactError, write_text
 
 T = TypeVar("T")
+LOCK_NAME = ".lock"
 
 
 class ConfigMismatchError(ArtifactError):
-    """A stage's artifact on disk was made with another config."""
+    """A stage's artifact on disk was made with another key (config)."""
+
+
+class RunLockedError(RuntimeError):
+    """Another process holds the run directory."""
+
+
+class ReadOnlyRunError(RuntimeError):
+    """A read-only run directory lacks a stage that would have to be built."""
 
 
 def _json_default(value):
@@ -43,9 +63,15 @@ def _json_default(value):
     return str(value)
 
 
-def _normalized(config: dict) -> dict:
-    """The config as it is stored: tuples as lists, numpy scalars and arrays as numbers and lists, others as str."""
-    return json.loads(json.dumps(config, default=_json_default))
+def normalized(key: dict) -> dict:
+    """The key as it is stored: tuples as lists, numpy scalars and arrays as numbers and lists, others as str."""
+    return json.loads(json.dumps(key, default=_json_default))
+
+
+def digest(key: dict) -> str:
+    """A short hex digest of a key (12 characters of its sha256), for the keys of the stages that depend on it."""
+    text = json.dumps(normalized(key), sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()[:12]
 
 
 def _diff(stored: dict, wanted: dict, prefix: str = "") -> list[str]:
@@ -59,51 +85,141 @@ def _diff(stored: dict, wanted: dict, prefix: str = "") -> list[str]:
     return lines
 
 
-class RunDirectory:
-    """A directory holding one run's stage artifacts, each beside a ``<name>.config.json``."""
+@dataclass(frozen=True)
+class StageSpec:
+    """One stage of a plan: its ``name``, its ``key`` and its artifact ``filename`` (relative to the run
+    directory)."""
 
-    def __init__(self, path: str | os.PathLike):
+    name: str
+    key: dict
+    filename: str
+
+    @property
+    def digest(self) -> str:
+        return digest(self.key)
+
+
+class RunDirectory:
+    """A directory holding one run's stage artifacts, each beside a ``<artifact>.key.json``.
+
+    Args:
+        path: the directory (created on the first write, not before).
+        readonly: open without writing; default: read-only when the directory exists and is not writable.
+    """
+
+    def __init__(self, path: str | os.PathLike, *, readonly: bool | None = None):
         self.path = Path(path)
-        self.path.mkdir(parents=True, exist_ok=True)
+        if readonly is None:
+            readonly = self.path.exists() and not os.access(self.path, os.W_OK)
+        self.readonly = bool(readonly)
         self.timings: dict[str, float] = {}
         self.reused: dict[str, bool] = {}
+        self.current: str | None = None  # the stage being built or loaded
+        self._lock_fd: int | None = None
 
-    def config_path(self, name: str) -> Path:
-        return self.path / f"{name}.config.json"
+    # ------------------------------------------------------------------------------------------------ lock
+    def acquire(self, holder: str | None = None) -> None:
+        """Takes the run directory for this process; raises :class:`RunLockedError` naming the holder if another
+        process has it. A lock left by a killed process is taken over. No-op when read-only."""
+        if self.readonly or self._lock_fd is not None:
+            return
+        self.path.mkdir(parents=True, exist_ok=True)
+        lock = self.path / LOCK_NAME
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            try:
+                info = json.loads(lock.read_text() or "{}")
+            except (OSError, json.JSONDecodeError):
+                info = {}
+            who = (f"pid {info.get('pid', '?')} on {info.get('host', '?')} since {info.get('started', '?')}: "
+                   f"{info.get('command', '?')}")
+            raise RunLockedError(f"run directory {self.path} is in use by {who}; wait for it to finish or choose "
+                                 "another run_dir") from None
+        info = {"pid": os.getpid(), "host": socket.gethostname(), "started": time.strftime("%Y-%m-%d %H:%M:%S"),
+                "command": holder or " ".join(sys.argv)}
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, json.dumps(info).encode(), 0)
+        self._lock_fd = fd
+        for leftover in self.path.rglob(".*.tmp*"):  # half-written files of a killed run (never under final names)
+            leftover.unlink(missing_ok=True)
 
-    def check(self, name: str, config: dict, filename: str) -> bool:
-        """True if the stage is done with this config, False if not started; raises on a mismatch."""
-        artifact, config_path = self.path / filename, self.config_path(name)
+    def release(self) -> None:
+        if self._lock_fd is not None:
+            fcntl.flock(self._lock_fd, fcntl.LOCK_UN)
+            os.close(self._lock_fd)
+            self._lock_fd = None
+
+    def __enter__(self) -> "RunDirectory":
+        self.acquire()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.release()
+
+    # ------------------------------------------------------------------------------------------------ keys
+    def key_path(self, filename: str) -> Path:
+        return self.path / f"{filename}.key.json"
+
+    def check(self, name: str, key: dict, filename: str) -> bool:
+        """True if the stage is done with this key, False if not started; raises on a mismatch."""
+        artifact, key_path = self.path / filename, self.key_path(filename)
         if not artifact.exists():
             return False
-        if not config_path.exists():
-            raise ConfigMismatchError(f"{artifact} exists but {config_path.name} does not: cannot tell which config "
+        if not key_path.exists():
+            raise ConfigMismatchError(f"{artifact} exists but {key_path.name} does not: cannot tell which config "
                                       "made it; use another run directory or remove the file")
         try:
-            stored = json.loads(config_path.read_text())
+            stored = json.loads(key_path.read_text())
         except (json.JSONDecodeError, UnicodeDecodeError) as error:
-            raise ArtifactError(f"corrupted stage config {config_path}: {error}") from error
+            raise ArtifactError(f"corrupted stage key {key_path}: {error}") from error
         if not isinstance(stored, dict):
-            raise ArtifactError(f"corrupted stage config {config_path}: not a JSON object")
-        wanted = _normalized(config)
+            raise ArtifactError(f"corrupted stage key {key_path}: not a JSON object")
+        wanted = normalized(key)
         if stored != wanted:
             raise ConfigMismatchError(f"stage {name!r} in {self.path} was made with another config:\n  "
                                       + "\n  ".join(_diff(stored, wanted))
                                       + "\nuse another run directory (run_dir=...) or remove that stage's files")
         return True
 
-    def stage(self, name: str, config: dict, build: Callable[[], T], save: Callable[[T, Path], Any],
+    def verify(self, plan: Iterable[StageSpec]) -> dict[str, bool]:
+        """Checks every stage of ``plan`` against the directory before any work: ``name -> done``. Raises one
+        :class:`ConfigMismatchError` listing every mismatched stage, or :class:`ReadOnlyRunError` when the directory
+        is read-only and a stage is not done."""
+        done, problems = {}, []
+        for spec in plan:
+            try:
+                done[spec.name] = self.check(spec.name, spec.key, spec.filename)
+            except ConfigMismatchError as error:
+                problems.append(str(error).split("\nuse another")[0])
+        if problems:
+            raise ConfigMismatchError("\n".join(problems) + "\nuse another run directory (run_dir=...) or remove "
+                                                            "those stages' files")
+        missing = [name for name, finished in done.items() if not finished]
+        if self.readonly and missing:
+            raise ReadOnlyRunError(f"run directory {self.path} is read-only and these stages are not finished: "
+                                   f"{', '.join(missing)}")
+        return done
+
+    # ------------------------------------------------------------------------------------------------ stages
+    def stage(self, name: str, key: dict, build: Callable[[], T], save: Callable[[T, Path], Any],
               load: Callable[[Path], T], filename: str) -> T:
-        """The result of stage ``name``: cached if done with ``config``, else built and saved."""
+        """The result of stage ``name``: cached if done with ``key``, else built and saved."""
         artifact = self.path / filename
         start = time.perf_counter()
-        if self.check(name, config, filename):
+        self.current = name
+        if self.check(name, key, filename):
             result = load(artifact)
             self.reused[name] = True
         else:
-            write_text(self.config_path(name), json.dumps(_normalized(config), indent=2, sort_keys=True))
+            if self.readonly:
+                raise ReadOnlyRunError(f"run directory {self.path} is read-only and stage {name!r} is not finished")
+            write_text(self.key_path(filename), json.dumps(normalized(key), indent=2, sort_keys=True))
             result = build()
             save(result, artifact)
             self.reused[name] = False
+        self.current = None
         self.timings[name] = time.perf_counter() - start
         return result

@@ -44,7 +44,7 @@ def test_built_once_then_loaded(tmp_path):
     assert stage.run(run) == [1, 2, 3]
     assert (stage.builds, stage.loads) == (1, 0)
     assert run.reused == {"numbers": False} and run.timings["numbers"] >= 0
-    assert json.loads((tmp_path / "numbers.config.json").read_text()) == json.loads(json.dumps(CONFIG))
+    assert json.loads((tmp_path / "numbers.json.key.json").read_text()) == json.loads(json.dumps(CONFIG))
     # same directory object, then a fresh one (a re-run)
     assert stage.run(run) == [1, 2, 3]
     rerun = RunDirectory(tmp_path)
@@ -91,7 +91,7 @@ def test_tuples_and_numpy_scalars_match_their_json_form(tmp_path):
     config = {**CONFIG, "num": np.int64(3), "scale": np.float32(0.5), "shape": np.array([2, 3])}
     stage = Stage()
     stage.run(RunDirectory(tmp_path), config)
-    stored = json.loads((tmp_path / "numbers.config.json").read_text())
+    stored = json.loads((tmp_path / "numbers.json.key.json").read_text())
     assert stored["num"] == 3 and stored["scale"] == 0.5 and stored["shape"] == [2, 3] and stored["dims"] == [2, 3]
     assert stage.run(RunDirectory(tmp_path), config) == [1, 2, 3]  # the re-run reuses it
     assert stage.run(RunDirectory(tmp_path), {**config, "num": 3, "dims": [2, 3]}) == [1, 2, 3]
@@ -103,20 +103,20 @@ def test_tuples_and_numpy_scalars_match_their_json_form(tmp_path):
 def test_artifact_without_config_raises(tmp_path):
     (tmp_path / "numbers.json").write_text("[1]")
     stage = Stage()
-    with pytest.raises(ConfigMismatchError, match="numbers.config.json"):
+    with pytest.raises(ConfigMismatchError, match="numbers.json.key.json"):
         stage.run(RunDirectory(tmp_path))
     assert stage.builds == 0
     assert (tmp_path / "numbers.json").read_text() == "[1]"
-    assert not (tmp_path / "numbers.config.json").exists()
+    assert not (tmp_path / "numbers.json.key.json").exists()
 
 
 @pytest.mark.parametrize("content", [b'{"robot": "a1", ', b"\xff\xfe\x00garbage", b"[1, 2]", b"3"])
 def test_corrupted_config_raises(tmp_path, content):
     Stage().run(RunDirectory(tmp_path))
-    (tmp_path / "numbers.config.json").write_bytes(content)
+    (tmp_path / "numbers.json.key.json").write_bytes(content)
     before = snapshot(tmp_path)
     stage = Stage()
-    with pytest.raises(ArtifactError, match="numbers.config.json"):
+    with pytest.raises(ArtifactError, match="numbers.json.key.json"):
         stage.run(RunDirectory(tmp_path))
     assert stage.builds == 0
     assert snapshot(tmp_path) == before
@@ -140,9 +140,94 @@ def test_failed_build_leaves_no_artifact(tmp_path):
         run.stage("other", {"a": 1}, broken, Stage.save, Stage().load, "other.json")
     other = Stage([4])
     assert other.run(RunDirectory(tmp_path), {"a": 2}, name="other", filename="other.json") == [4]
-    assert json.loads((tmp_path / "other.config.json").read_text()) == {"a": 2}
+    assert json.loads((tmp_path / "other.json.key.json").read_text()) == {"a": 2}
 
 
 def test_config_mismatch_is_an_artifact_error():
     assert issubclass(ConfigMismatchError, ArtifactError)
     assert issubclass(ArtifactError, ValueError)
+
+
+LOCKER = """
+import sys, time
+from hierloco.runs import RunDirectory
+run = RunDirectory(sys.argv[1])
+run.acquire("policy.epochs=20")
+print("locked", flush=True)
+time.sleep(60)
+"""
+
+
+def _locker(tmp_path):
+    import subprocess
+    import sys
+
+    process = subprocess.Popen([sys.executable, "-c", LOCKER, str(tmp_path)], stdout=subprocess.PIPE, text=True)
+    assert process.stdout.readline().strip() == "locked"
+    return process
+
+
+def test_a_second_process_is_refused_naming_the_holder(tmp_path):
+    from hierloco.runs import RunLockedError
+
+    holder = _locker(tmp_path)
+    try:
+        with pytest.raises(RunLockedError, match=rf"in use by pid {holder.pid} .*policy.epochs=20"):
+            RunDirectory(tmp_path).acquire()
+    finally:
+        holder.kill()
+        holder.wait()
+
+
+def test_a_killed_holder_s_lock_is_taken_over(tmp_path):
+    holder = _locker(tmp_path)
+    holder.kill()  # SIGKILL: no clean-up, the lock file stays
+    holder.wait()
+    assert (tmp_path / ".lock").exists()
+    run = RunDirectory(tmp_path)
+    run.acquire()  # the kernel released the dead process's flock
+    assert json.loads((tmp_path / ".lock").read_text())["pid"] == __import__("os").getpid()
+    run.release()
+
+
+def test_verify_checks_a_whole_plan_before_any_work(tmp_path):
+    from hierloco.runs import StageSpec
+
+    Stage().run(RunDirectory(tmp_path))
+    Stage([2]).run(RunDirectory(tmp_path), {"b": 1}, name="b", filename="b.json")
+    plan = [StageSpec("numbers", {**CONFIG, "lr": 5.0}, "numbers.json"), StageSpec("b", {"b": 2}, "b.json"),
+            StageSpec("c", {}, "c.json")]
+    before = snapshot(tmp_path)
+    with pytest.raises(ConfigMismatchError) as info:
+        RunDirectory(tmp_path).verify(plan)
+    assert "'numbers'" in str(info.value) and "'b'" in str(info.value)  # every mismatch at once
+    assert snapshot(tmp_path) == before
+    assert RunDirectory(tmp_path).verify(plan[2:]) == {"c": False}
+
+
+def test_a_read_only_directory_is_read_but_never_written(tmp_path):
+    import os
+
+    from hierloco.runs import ReadOnlyRunError, StageSpec
+
+    stage = Stage()
+    stage.run(RunDirectory(tmp_path))
+    os.chmod(tmp_path, 0o555)
+    try:
+        run = RunDirectory(tmp_path)
+        if not run.readonly:
+            pytest.skip("running as a user who may write anywhere (root)")
+        run.acquire()  # no lock file on a read-only directory
+        assert stage.run(run) == [1, 2, 3] and stage.loads == 1
+        with pytest.raises(ReadOnlyRunError, match="'c'"):
+            run.verify([StageSpec("c", {}, "c.json")])
+    finally:
+        os.chmod(tmp_path, 0o755)
+
+
+def test_readonly_can_be_forced(tmp_path):
+    from hierloco.runs import ReadOnlyRunError
+
+    with pytest.raises(ReadOnlyRunError, match="numbers"):
+        Stage().run(RunDirectory(tmp_path, readonly=True))
+    assert not list(tmp_path.iterdir())

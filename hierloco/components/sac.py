@@ -17,7 +17,7 @@ Example:
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Sequence
 
 import torch
@@ -43,6 +43,7 @@ class SACAgent:
     optimizer: torch.optim.Optimizer
     target_updater: SoftUpdate
     config: dict
+    metadata: dict = field(default_factory=dict)
 
     @classmethod
     def build(cls, observation_dim: int, action_low: Sequence[float], action_high: Sequence[float], *,
@@ -82,14 +83,16 @@ class SACAgent:
         self.target_updater.step()
         return {key: float(out[key].detach()) for key in ("loss_actor", "loss_qvalue", "loss_alpha", "alpha")}
 
-    def save(self, path: str | os.PathLike, metadata: dict | None = None) -> None:
+    def save(self, path: str | os.PathLike) -> None:
+        """Writes a checkpoint (config, networks, temperature, targets, metadata) to ``path`` atomically."""
         save_checkpoint(path, CHECKPOINT_KIND, CHECKPOINT_FORMAT, {
-            "config": self.config, "loss_state": self.loss.state_dict(), "metadata": dict(metadata or {})})
+            "config": self.config, "loss_state": self.loss.state_dict(), "metadata": dict(self.metadata)})
 
     @classmethod
-    def load(cls, path: str | os.PathLike) -> tuple["SACAgent", dict]:
-        """The agent (actor, Q networks, temperature, targets) and the metadata saved with it."""
+    def load(cls, path: str | os.PathLike) -> "SACAgent":
+        """The agent (actor, Q networks, temperature, targets) with the metadata saved with it."""
         payload = load_checkpoint(path, CHECKPOINT_KIND, CHECKPOINT_FORMAT)
         agent = cls.build(**payload["config"])
         agent.loss.load_state_dict(payload["loss_state"])
-        return agent, payload["metadata"]
+        agent.metadata = payload["metadata"]
+        return agent

@@ -10,14 +10,12 @@ Every trial is a LAT run in ``out_dir/<ablation>_<value>/seed<trial>`` (finished
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import hydra
 from omegaconf import DictConfig
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from common import studies  # noqa: E402
+from recipes.common import studies  # noqa: E402
 from hierloco.envs.robots import ROBOTS  # noqa: E402
 from hierloco.io import write_text  # noqa: E402
 from hierloco.plots import plot_ablations  # noqa: E402

@@ -1,34 +1,86 @@
-"""The entry point of the model-based recipes (LAT, LIB, IK): a Hydra ``main`` over the recipe's own
-``config.yaml`` and ``utils.py`` (``validate``, ``METHOD``, ``prepare``), running the shared pipeline."""
+"""The entry point of every recipe: Hydra over the recipe's ``config.yaml``, with clean errors.
+
+A user's mistake (a bad config value, an unknown robot, a run directory made with another config or in use by
+another run, a corrupted artifact, an expert library that does not walk as commanded) prints one line and exits
+with status 2, before any work and with no traceback; Ctrl-C says which stage was interrupted and that re-running
+resumes (status 130). Anything else is a bug and keeps its traceback (status 1).
+"""
 
 from __future__ import annotations
 
-import importlib.util
+import functools
+import os
+import sys
 from pathlib import Path
+from typing import Callable
 
 import hydra
-from omegaconf import DictConfig
 
-from common import pipeline
-
-
-def load_recipe_utils(recipe_file: str):
-    """The ``utils.py`` beside ``recipe_file``, as a module of its own name (recipes do not share one ``utils``)."""
-    folder = Path(recipe_file).resolve().parent
-    spec = importlib.util.spec_from_file_location(f"{folder.name}_utils", folder / "utils.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+EXIT_USER_ERROR = 2
+EXIT_INTERRUPTED = 130
 
 
-def model_based_main(recipe_file: str):
-    """``main()`` for the recipe whose ``train.py`` is ``recipe_file``."""
-    folder = Path(recipe_file).resolve().parent
-    utils = load_recipe_utils(recipe_file)
+def user_errors() -> tuple[type[BaseException], ...]:
+    """The exception types that are the user's to fix, reported in one line."""
+    from omegaconf.errors import OmegaConfBaseException
 
-    @hydra.main(config_path=str(folder), config_name="config", version_base=None)
-    def main(cfg: DictConfig) -> None:
-        utils.validate(cfg)
-        pipeline.run_pipeline(cfg, utils.METHOD, utils.prepare)
+    from hierloco.io import ArtifactError
+    from hierloco.runs import ReadOnlyRunError, RunLockedError
+    from recipes.common.config import ConfigError
 
-    return main
+    errors = [ConfigError, ArtifactError, RunLockedError, ReadOnlyRunError, OmegaConfBaseException]
+    try:
+        from hierloco.components.expert_library import ExpertQualityError
+        errors.append(ExpertQualityError)
+    except ImportError:
+        pass
+    return tuple(errors)
+
+
+def one_line(error: BaseException) -> str:
+    text = " ".join(str(error).split())
+    return text or type(error).__name__
+
+
+def recipe_main(recipe_file: str, config_name: str = "config") -> Callable:
+    """Decorates a recipe's ``main(cfg)``: returns the console entry point (call it under ``__main__``)."""
+    folder = str(Path(recipe_file).resolve().parent)
+
+    def decorate(main: Callable) -> Callable:
+        @hydra.main(config_path=folder, config_name=config_name, version_base=None)
+        @functools.wraps(main)
+        def task(cfg):
+            try:
+                return main(cfg)
+            except user_errors() as error:  # reported here: Hydra would add a line of its own
+                print(f"error: {one_line(error)}", file=sys.stderr)
+                sys.exit(EXIT_USER_ERROR)
+
+        @functools.wraps(main)
+        def entry():
+            os.environ.setdefault("HYDRA_FULL_ERROR", "1")  # Hydra raises its own errors; this wrapper reports them
+            from hydra.errors import HydraException
+
+            try:
+                return task()
+            except KeyboardInterrupt:
+                print(f"interrupted{_where()}; finished stages are kept: run the same command again to resume",
+                      file=sys.stderr)
+                sys.exit(EXIT_INTERRUPTED)
+            except HydraException as error:  # a bad override, an unknown config group option
+                print(f"error: {one_line(error)}", file=sys.stderr)
+                sys.exit(EXIT_USER_ERROR)
+
+        entry.body = main  # the undecorated recipe, for recipes/<method>/evaluate.py
+        return entry
+
+    return decorate
+
+
+def _where() -> str:
+    from recipes.common.run import CURRENT
+
+    current, directory = CURRENT.get("stage"), CURRENT.get("run_dir")
+    if current:
+        return f" in stage {current!r} of {directory}"
+    return f" in {directory}" if directory else ""

@@ -1,27 +1,203 @@
-"""Helpers of the study recipes (compare, ablations): run a method's recipe as its own process, in its own cached
-run directory, and read back its per-episode results."""
+"""Studies (compare, ablations, adverse, ...) as jobs on Ray: one recipe run per job, one machine to a cluster.
+
+A :class:`Job` is one recipe run (``recipes/<method>/train.py`` with overrides, into its own run directory). 
+:func:`run_jobs` submits every job as a Ray task with the cores it asks for (``num_cpus``), on a local Ray instance
+started for the study, or on the cluster at ``address`` / ``RAY_ADDRESS``. Each job runs the recipe in a subprocess
+with as many simulation and torch threads as it has cores, so jobs never oversubscribe the machine. Finished jobs
+are reused from their run directories (a killed study, re-run, resubmits only what did not finish); a failed job
+is reported with its run directory and the others go on; the rows of every job come back to the driver through Ray,
+so a cluster without shared storage works too (``fetch_run_dirs=True`` also brings each run directory back).
+
+Example:
+    >>> jobs = [Job("lat", "outputs/lat/tiny/a1_seed0", ["preset=tiny"]), Job("lib", "outputs/lib/tiny/a1_seed0",
+    ...         ["preset=tiny"])]
+    >>> results = run_jobs(jobs, cores_per_job=1)   # doctest: +SKIP
+"""
 
 from __future__ import annotations
 
+import io
+import json
+import os
 import subprocess
 import sys
+import tarfile
+import time
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Sequence
 
+from hierloco.io import write_text
 from hierloco.results import read_csv
 
 RECIPES = Path(__file__).resolve().parents[1]
 METHODS = tuple(sorted(p.name for p in RECIPES.iterdir() if (p / "train.py").exists()))
+DONE = "job.json"  # written into a job's run directory when it finished
 
 
-def run_recipe(method: str, run_dir: str | Path, overrides: Sequence[str]) -> list[dict]:
-    """Runs ``recipes/<method>/train.py`` with ``overrides`` into ``run_dir`` (finished stages are reused) and
-    returns the rows of its ``episodes.csv``; raises if the run fails."""
-    if method not in METHODS:
-        raise ValueError(f"unknown method {method!r} (recipes: {', '.join(METHODS)})")
-    command = [sys.executable, str(RECIPES / method / "train.py"), f"run_dir={run_dir}", *overrides]
-    print(f"\n=== {method}: {' '.join(command[2:])}", flush=True)
-    result = subprocess.run(command)
-    if result.returncode != 0:
-        raise RuntimeError(f"{method} run into {run_dir} failed with exit code {result.returncode}")
-    return read_csv(Path(run_dir) / "episodes.csv")
+@dataclass
+class Job:
+    """One recipe run: ``method``'s recipe with ``overrides`` into ``run_dir``, on ``cores`` cores."""
+
+    method: str
+    run_dir: str
+    overrides: list[str]
+    cores: int = 1
+    labels: dict = field(default_factory=dict)  # added to every result row (e.g. the ablation value)
+
+    def command(self) -> list[str]:
+        return [sys.executable, str(RECIPES / self.method / "train.py"), f"run_dir={self.run_dir}",
+                f"nthread={self.cores}", *self.overrides]
+
+    def signature(self) -> dict:
+        return {"method": self.method, "overrides": list(self.overrides)}
+
+
+@dataclass
+class JobResult:
+    job: Job
+    ok: bool
+    rows: list[dict]
+    seconds: float
+    reused: bool = False
+    error: str = ""
+
+
+def finished(job: Job) -> bool:
+    """Whether ``job`` already finished in its run directory with the same method and overrides."""
+    marker = Path(job.run_dir) / DONE
+    if not marker.exists() or not (Path(job.run_dir) / "episodes.csv").exists():
+        return False
+    try:
+        return json.loads(marker.read_text()).get("signature") == job.signature()
+    except (OSError, json.JSONDecodeError):
+        return False
+
+
+def execute(job: Job, fetch_run_dir: bool = False) -> dict:
+    """Runs one job here (in a subprocess); returns its outcome, its result rows and optionally its run directory
+    as a tar archive. This is the body of the Ray task."""
+    start = time.perf_counter()
+    env = {**os.environ, "OMP_NUM_THREADS": str(job.cores), "MKL_NUM_THREADS": str(job.cores),
+           "WANDB_SILENT": "true"}
+    log = Path(job.run_dir).parent / f"{Path(job.run_dir).name}.log"
+    log.parent.mkdir(parents=True, exist_ok=True)
+    with open(log, "w") as out:
+        code = subprocess.run(job.command(), stdout=out, stderr=subprocess.STDOUT, env=env, cwd=os.getcwd()).returncode
+    outcome = {"ok": code == 0, "seconds": time.perf_counter() - start, "rows": [], "error": "", "archive": None}
+    if code != 0:
+        tail = log.read_text().strip().splitlines()[-3:]
+        outcome["error"] = f"exit code {code}: " + " | ".join(tail) + f" (log: {log})"
+        return outcome
+    outcome["rows"] = read_csv(Path(job.run_dir) / "episodes.csv")
+    write_text(Path(job.run_dir) / DONE, json.dumps({"signature": job.signature(), "seconds": outcome["seconds"]}))
+    if fetch_run_dir:
+        buffer = io.BytesIO()
+        with tarfile.open(fileobj=buffer, mode="w:gz") as archive:
+            archive.add(job.run_dir, arcname=".")
+        outcome["archive"] = buffer.getvalue()
+    return outcome
+
+
+def _progress(done: int, running: int, failed: int, pending: int, start: float, durations: list[float],
+              slots: int) -> str:
+    elapsed = time.perf_counter() - start
+    line = f"study: {done} done, {running} running, {failed} failed, {pending} pending; elapsed {elapsed / 60:.1f} min"
+    if durations and (running or pending):
+        mean = sum(durations) / len(durations)
+        line += f", about {mean * (running / 2 + pending) / max(1, slots) / 60:.1f} min to go"
+    return line
+
+
+def run_jobs(jobs: Sequence[Job], *, address: str | None = None, cores_per_job: int | None = None,
+             fetch_run_dirs: bool = False, progress_every: float = 30.0) -> list[JobResult]:
+    """Runs ``jobs`` through Ray (see the module docstring) and returns one :class:`JobResult` per job, in order."""
+    import ray
+
+    results: dict[int, JobResult] = {}
+    todo = []
+    address = address or os.environ.get("RAY_ADDRESS")
+    for index, job in enumerate(jobs):
+        if not address:  # local workers share this file system: give them absolute paths
+            job.run_dir = str(Path(job.run_dir).resolve())
+        if cores_per_job is not None:
+            job.cores = int(cores_per_job)
+        if finished(job):
+            results[index] = JobResult(job, True, read_csv(Path(job.run_dir) / "episodes.csv"), 0.0, reused=True)
+        else:
+            todo.append(index)
+    print(f"study: {len(jobs)} jobs, {len(jobs) - len(todo)} reused from their run directories", flush=True)
+    if todo:
+        started_here = not ray.is_initialized()
+        if started_here:
+            if address:
+                ray.init(address=address, log_to_driver=False,
+                         runtime_env={"working_dir": str(RECIPES.parent), "excludes": ["outputs", ".venv", ".git"]})
+            else:
+                ray.init(num_cpus=_available_cores(), include_dashboard=False, log_to_driver=False,
+                         configure_logging=False)
+        remote = ray.remote(execute)
+        pending = {remote.options(num_cpus=jobs[i].cores).remote(jobs[i], fetch_run_dirs): i for i in todo}
+        slots = max(1, int(ray.cluster_resources().get("CPU", 1)) // max(1, jobs[todo[0]].cores))
+        start, last, durations = time.perf_counter(), 0.0, []
+        while pending:
+            ready, _ = ray.wait(list(pending), num_returns=1, timeout=progress_every)
+            for ref in ready:
+                index = pending.pop(ref)
+                job = jobs[index]
+                try:
+                    outcome = ray.get(ref)
+                except Exception as error:  # the worker died
+                    outcome = {"ok": False, "rows": [], "seconds": 0.0, "error": str(error), "archive": None}
+                if outcome.get("archive") and not Path(job.run_dir).exists():
+                    with tarfile.open(fileobj=io.BytesIO(outcome["archive"]), mode="r:gz") as archive:
+                        archive.extractall(job.run_dir, filter="data")
+                results[index] = JobResult(job, outcome["ok"], outcome["rows"], outcome["seconds"],
+                                           error=outcome["error"])
+                durations.append(outcome["seconds"])
+                if not outcome["ok"]:
+                    print(f"study: job {job.method} {job.run_dir} failed: {outcome['error']}", flush=True)
+            if time.perf_counter() - last >= progress_every or not pending:
+                failed = sum(not r.ok for r in results.values())
+                running = min(len(pending), slots)
+                print(_progress(len(results) - failed, running, failed, len(pending) - running, start, durations,
+                                slots), flush=True)
+                last = time.perf_counter()
+        if started_here:
+            ray.shutdown()
+    return [results[i] for i in range(len(jobs))]
+
+
+def _available_cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
+def rows_of(results: Sequence[JobResult]) -> list[dict]:
+    """The per-episode rows of the successful jobs, each with its job's labels."""
+    return [{**row, **result.job.labels} for result in results if result.ok for row in result.rows]
+
+
+def report_failures(results: Sequence[JobResult]) -> int:
+    """Prints the failed jobs with their run directories; returns how many failed."""
+    failed = [r for r in results if not r.ok]
+    for result in failed:
+        print(f"failed: {result.job.method} in {result.job.run_dir}: {result.error}", file=sys.stderr)
+    return len(failed)
+
+
+def run_here(job: Job) -> list[dict]:
+    """Runs one job on this machine without Ray (a study that needs a single run, e.g. navigation's LAT run);
+    returns its rows, raising with the job's log when it fails."""
+    if finished(job):
+        return read_csv(Path(job.run_dir) / "episodes.csv")
+    outcome = execute(job)
+    if not outcome["ok"]:
+        raise RuntimeError(f"{job.method} run into {job.run_dir} failed: {outcome['error']}")
+    return outcome["rows"]
+
+
+__all__ = ["DONE", "METHODS", "Job", "JobResult", "execute", "finished", "report_failures", "rows_of", "run_here",
+           "run_jobs"]

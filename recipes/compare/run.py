@@ -10,14 +10,12 @@ finished runs are reused. Writes ``comparison.csv``, ``comparison.md`` and ``com
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import hydra
 from omegaconf import DictConfig
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from common import studies  # noqa: E402
+from recipes.common import studies  # noqa: E402
 from hierloco.envs.robots import ROBOTS  # noqa: E402
 from hierloco.io import write_text  # noqa: E402
 from hierloco.plots import plot_comparison  # noqa: E402

@@ -1,23 +1,58 @@
-"""Factories of the IK recipe: the expert controller driven by velocity commands (the rest is the shared pipeline)."""
+"""Factories of the IK recipe: its plan of stages (the shared dynamics and evaluation stages over velocity commands),
+its low level (the expert controller, closed loop) and its config checks."""
 
 from __future__ import annotations
 
-from common import pipeline
-from hierloco.components.low_level import CommandLowLevel
-from hierloco.envs.robots import get_robot
-from hierloco.runs import RunDirectory
+import inspect
+
+from recipes.common import config, stages
+from recipes.common.config import CONTINUOUS_PLANNERS
 
 METHOD = "ik"
 
 
-def validate(cfg) -> None:
-    pipeline.validate(cfg)
+def checks(c: config.Checker, robot) -> None:
+    from hierloco.components.experts import RaibertController
+
+    config.check_experts(c, robot, library=False)
+    config.check_dynamics(c)
+    config.check_planner(c, CONTINUOUS_PLANNERS)
+    config.check_eval(c)
+    config.check_logger(c)
+    accepted = [p for p in inspect.signature(RaibertController.__init__).parameters
+                if p not in ("self", "robot", "num_robots")]
+    for option in c.cfg.controller:
+        if option not in accepted:
+            c.fail(f"controller has no option {option!r} (its options: {', '.join(accepted)})")
 
 
-def prepare(cfg, run: RunDirectory, logger, reports: dict) -> pipeline.LowLevelRecipe:
-    """The Raibert controller with leg IK, one velocity command per action, over the robot's command box."""
-    robot = get_robot(cfg.robot)
-    steps = cfg.experts.steps_per_action
-    config = {"controller": {"robot": robot.name, "steps_per_action": steps, "command_low": list(robot.command_low),
-                             "command_high": list(robot.command_high), "gait_period": robot.gait_period}}
-    return pipeline.LowLevelRecipe(make=lambda num_robots: CommandLowLevel(robot, num_robots, steps), config=config)
+def low_level_key(cfg, robot) -> dict:
+    from hierloco.envs.robots import robot_fingerprint
+
+    return {"kind": "command", "robot": robot_fingerprint(robot), "steps_per_action": cfg.steps_per_action,
+            "controller": config.section(cfg, "controller")}
+
+
+def plan(cfg, robot) -> list[stages.Stage]:
+    """Per setting: dynamics data over velocity commands, model, one evaluation per task."""
+    low_level = low_level_key(cfg, robot)
+    planned = []
+    for setting in cfg.settings:
+        data = stages.dynamics_data_stage(cfg, low_level, setting, robot)
+        model = stages.dynamics_model_stage(cfg, data, setting)
+        planned += [data, model, *stages.evaluation_stages(cfg, setting, model, low_level)]
+    return planned
+
+
+def manifest(cfg, robot) -> dict:
+    return {"low_level": {"kind": "command", "options": {"steps_per_action": cfg.steps_per_action,
+                                                         **config.section(cfg, "controller")}}}
+
+
+def make_low_level(run):
+    """The Raibert controller with leg IK for ``num_robots`` robots, one velocity command per action, over the
+    robot's command box (it keeps a gait clock per robot, so each env gets its own)."""
+    from hierloco.components.low_level import CommandLowLevel
+
+    options = config.section(run.cfg, "controller")
+    return lambda num_robots: CommandLowLevel(run.robot, num_robots, run.cfg.steps_per_action, **options)

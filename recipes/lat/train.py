@@ -1,22 +1,34 @@
-"""LAT end to end: experts -> latent gait policy -> CoM dynamics data -> dynamics model -> MPC on every task.
+"""LAT end to end (Li et al., RA-L 2021): experts -> latent gait policy -> CoM dynamics -> MPC over z.
 
     python recipes/lat/train.py                       # paper scale, A1, seed 0
     python recipes/lat/train.py preset=small robot=daisy settings=[normal,legs_disabled]
-    python recipes/lat/train.py -m seed=0,1,2         # a sweep (Hydra multirun)
+    python recipes/lat/train.py -m seed=0,1,2         # a sweep (Hydra multirun): one run directory per job
 
-Each stage is cached in the run directory with its config and reused when the config matches.
+Every stage is cached in the run directory with its key: a re-run reuses finished stages, a killed run resumes.
 """
 
-from __future__ import annotations
-
 import hierloco  # noqa: F401  (first: headless MuJoCo rendering is set before anything loads MuJoCo)
-import sys
-from pathlib import Path
+from recipes.common.entry import recipe_main
+from recipes.common.run import open_run
+from utils import METHOD, checks, make_low_level, manifest, plan
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from common.entry import model_based_main  # noqa: E402  (the pipeline shared by LAT, LIB and IK)
 
-main = model_based_main(__file__)  # Hydra over this folder's config.yaml, with this folder's utils.py
+@recipe_main(__file__)
+def main(cfg) -> float:
+    run = open_run(cfg, METHOD, plan, checks, manifest)  # config, every stage's key, lock: before any work
+
+    library = run.stage("experts")                                  # G expert gaits (Sec. III-A)
+    trained = run.stage("gait_policy", library)                     # pi(t, z) and one z per expert (III-B)
+    low_level = make_low_level(run, trained)                        # z -> N joint targets, open loop
+    run.stage("gait_policy_check", low_level(1), library)           # pi(., z_g) walks like expert g
+
+    for setting in run.settings:                                    # normal, legs_disabled
+        data = run.stage(f"dynamics_data_{setting}", low_level)     # random z held one action each (III-C)
+        model = run.stage(f"dynamics_model_{setting}", data, low_level(1))  # (dx, dy, dyaw, v') = f(v, z)
+        run.evaluate(setting, low_level, model)                     # MPC over z on every task (III-D)
+
+    return run.finish(low_level(1))                                 # tables, figures, videos; headline cost
+
 
 if __name__ == "__main__":
     main()

@@ -1,20 +1,49 @@
-"""Factories of the LAT recipe: the latent low level (``recipes/common/latent.py``) and the config checks.
+"""Factories of the LAT recipe: its plan of stages, its low level and its config checks.
 
-Everything after the low level (dynamics data, model, MPC, results) is the shared pipeline in
-``recipes/common/pipeline.py``. Only recipe code reads the config; the library takes keyword arguments.
+The stages themselves (experts, gait policy, dynamics, evaluation) are shared with the other recipes and live in
+``recipes/common/stages.py``; only recipe code reads the config, the library takes keyword arguments.
 """
 
 from __future__ import annotations
 
-from common import latent, pipeline
+from recipes.common import config, stages
+from recipes.common.config import CONTINUOUS_PLANNERS
 
 METHOD = "lat"
-prepare = latent.prepare  # the pipeline's low-level hook: experts -> latent gait policy -> its check
 
 
-def validate(cfg) -> None:
-    extra = pipeline.check_positive({"experts.num_experts": cfg.experts.num_experts, "policy.epochs": cfg.policy.epochs,
-                                     "policy.hidden": cfg.policy.hidden})
-    if not 1 <= cfg.policy.latent_dim <= 4:
-        extra.append(f"policy.latent_dim must be 2, 3 or 4 (1 also works), got {cfg.policy.latent_dim}")
-    pipeline.validate(cfg, extra=extra)
+def checks(c: config.Checker, robot) -> None:
+    config.check_experts(c, robot)
+    config.check_policy(c)
+    config.check_dynamics(c)
+    config.check_planner(c, CONTINUOUS_PLANNERS)
+    config.check_eval(c)
+    config.check_logger(c)
+
+
+def plan(cfg, robot) -> list[stages.Stage]:
+    """Experts -> gait policy -> its check -> per setting: dynamics data, model, one evaluation per task."""
+    from hierloco.envs.robots import robot_fingerprint
+
+    experts = stages.experts_stage(cfg, robot_fingerprint(robot))
+    policy = stages.gait_policy_stage(cfg, experts)
+    low_level = stages.latent_low_level(policy)
+    planned = [experts, policy, stages.gait_policy_check_stage(cfg, policy)]
+    for setting in cfg.settings:
+        data = stages.dynamics_data_stage(cfg, low_level, setting, robot)
+        model = stages.dynamics_model_stage(cfg, data, setting)
+        planned += [data, model, *stages.evaluation_stages(cfg, setting, model, low_level)]
+    return planned
+
+
+def manifest(cfg, robot) -> dict:
+    """What :func:`hierloco.load_run` needs to rebuild this run's parts."""
+    return {"low_level": {"kind": "latent"}}
+
+
+def make_low_level(run, trained):
+    """``pi(., z)``: one stateless low level serves any number of robots."""
+    from hierloco.components.low_level import LatentLowLevel
+
+    low_level = LatentLowLevel(trained, run.robot, device=run.cfg.device)
+    return lambda num_robots: low_level

@@ -1,23 +1,42 @@
-"""Factories of the LIB recipe: the expert library as a discrete action set (the rest is the shared pipeline)."""
+"""Factories of the LIB recipe: its plan of stages (experts, then the shared dynamics and evaluation stages), its low
+level (the experts replayed) and its config checks."""
 
 from __future__ import annotations
 
-from common import pipeline
-from hierloco.components.low_level import ExpertReplayLowLevel
-from hierloco.runs import RunDirectory
+from recipes.common import config, stages
 
 METHOD = "lib"
 
 
-def validate(cfg) -> None:
-    pipeline.validate(cfg, planners=("exhaustive",),
-                      extra=pipeline.check_positive({"experts.num_experts": cfg.experts.num_experts}))
+def checks(c: config.Checker, robot) -> None:
+    config.check_experts(c, robot)
+    config.check_dynamics(c)
+    config.check_planner(c, ("exhaustive",))
+    config.check_eval(c)
+    config.check_logger(c)
 
 
-def prepare(cfg, run: RunDirectory, logger, reports: dict) -> pipeline.LowLevelRecipe:
-    """The expert library; the low level replays expert g's recorded pattern for action g."""
-    library = pipeline.stage_experts(cfg, run)
-    reports["experts"] = library.metadata
+def plan(cfg, robot) -> list[stages.Stage]:
+    """Experts -> per setting: dynamics data over expert indices, model, one evaluation per task."""
+    from hierloco.envs.robots import robot_fingerprint
+
+    experts = stages.experts_stage(cfg, robot_fingerprint(robot))
+    low_level = {"kind": "expert_replay", "experts": experts.digest}
+    planned = [experts]
+    for setting in cfg.settings:
+        data = stages.dynamics_data_stage(cfg, low_level, setting, robot)
+        model = stages.dynamics_model_stage(cfg, data, setting)
+        planned += [data, model, *stages.evaluation_stages(cfg, setting, model, low_level)]
+    return planned
+
+
+def manifest(cfg, robot) -> dict:
+    return {"low_level": {"kind": "expert_replay"}}
+
+
+def make_low_level(library):
+    """Action g replays expert g's recorded pattern (stateless: one object serves any number of robots)."""
+    from hierloco.components.low_level import ExpertReplayLowLevel
+
     low_level = ExpertReplayLowLevel(library)
-    return pipeline.LowLevelRecipe(make=lambda num_robots: low_level,
-                                   config={"experts": pipeline.experts_config(cfg)})
+    return lambda num_robots: low_level

@@ -11,27 +11,21 @@ from __future__ import annotations
 
 import hierloco  # noqa: F401  (first: headless MuJoCo rendering is set before anything loads MuJoCo)
 import json
-import sys
 from pathlib import Path
 
 import hydra
 import numpy as np
 from omegaconf import DictConfig
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from common import studies  # noqa: E402
-from hierloco.components.com_model import TrainedCoMModel  # noqa: E402
+from recipes.common import studies  # noqa: E402
 from hierloco.components.evaluation import run_task  # noqa: E402
-from hierloco.components.gait_policy import TrainedGaitPolicy  # noqa: E402
-from hierloco.components.low_level import LatentLowLevel  # noqa: E402
-from hierloco.components.planners import RandomShootingPlanner  # noqa: E402
 from hierloco.envs.latent_env import LatentActionEnv  # noqa: E402
 from hierloco.envs.navigation import clearance, cluttered_arena, plan_path  # noqa: E402
 from hierloco.envs.robots import ROBOTS  # noqa: E402
 from hierloco.envs.tasks import TrajectoryTracking  # noqa: E402
-from hierloco.envs.world_model import CoMWorldModelEnv  # noqa: E402
 from hierloco.io import write_text  # noqa: E402
 from hierloco.plots import plot_navigation  # noqa: E402
+from hierloco.trained import load_run  # noqa: E402
 from hierloco.render import render_frames, save_video  # noqa: E402
 
 
@@ -51,13 +45,10 @@ def main(cfg: DictConfig) -> None:
     lat_dir = Path(cfg.lat_run_dir)
     studies.run_recipe("lat", lat_dir, [f"preset={cfg.lat_preset}", f"robot={cfg.robot}", f"seed={cfg.seed}",
                                         f"progress={str(cfg.progress).lower()}"])
-    trained = TrainedGaitPolicy.load(lat_dir / "gait_policy.pt")
-    model = TrainedCoMModel.load(lat_dir / "dynamics_model_normal.pt")
-    low_level = LatentLowLevel(trained, cfg.robot)
-    world_model = CoMWorldModelEnv(model.model.eval(), action_low=low_level.action_low,
-                                   action_high=low_level.action_high)
-    planner = RandomShootingPlanner(world_model, planning_horizon=cfg.planner.horizon,
-                                    num_candidates=cfg.planner.num_candidates, seed=cfg.seed)
+    trained = load_run(lat_dir)  # the gait policy, the CoM model and the planner of the LAT run
+    low_level = trained.low_level()
+    planner = trained.planner(name="random_shooting", horizon=cfg.planner.horizon,
+                              num_candidates=cfg.planner.num_candidates)
     task = TrajectoryTracking(path=path, speed=cfg.speed, extra_steps=cfg.extra_steps)
     task.name = "navigation"
     env = LatentActionEnv(low_level, num_robots=1, record=True, seed=cfg.seed, obstacles=arena.obstacles)

@@ -1,38 +1,75 @@
-"""Factories of the SAC recipe: the training variant of each task, the training env, the SAC training loop and the
-evaluation of the trained policy on every target. The LAT low level comes from ``recipes/common/latent.py``."""
+"""Factories of the SAC recipe: its plan of stages, the training variant of each task, the training env and the
+evaluation of a trained policy. The LAT low level comes from the shared stages (``recipes/common/stages.py``); the
+SAC training loop is in ``train.py``."""
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 import torch
-from torchrl.collectors import Collector
-from torchrl.data import LazyTensorStorage, ReplayBuffer
+from tensordict.nn import InteractionType, set_interaction_type
 from torchrl.envs import Compose, TransformedEnv
-from tqdm.auto import tqdm
 
-from common import pipeline
 from hierloco.components.evaluation import run_task
 from hierloco.components.sac import SACAgent
 from hierloco.envs.latent_env import LatentActionEnv
 from hierloco.envs.tasks import GoalReaching, Task, TrajectoryTracking, VelocityTracking
 from hierloco.envs.transforms import GoalObservation, TaskTransform
+from recipes.common import config, report, stages
+from recipes.common.config import make_task_from_spec, section
 
 METHOD = "sac"
 
 
-def validate(cfg) -> None:
-    s = cfg.sac
-    extra = pipeline.check_positive({"experts.num_experts": cfg.experts.num_experts, "policy.epochs": cfg.policy.epochs,
-                                     "sac.total_frames": s.total_frames, "sac.num_robots": s.num_robots,
-                                     "sac.batch_size": s.batch_size, "sac.hidden": s.hidden, "sac.lr": s.lr,
-                                     "sac.buffer_size": s.buffer_size, "sac.updates_per_frame": s.updates_per_frame})
-    if not 0 < cfg.sac.gamma < 1:
-        extra.append(f"sac.gamma must be in (0, 1), got {cfg.sac.gamma}")
-    if list(cfg.settings) != ["normal"]:
-        extra.append(f"the SAC recipe runs the normal setting only, got settings={list(cfg.settings)}")
-    pipeline.validate(cfg, extra=extra)
+def checks(c: config.Checker, robot) -> None:
+    config.check_experts(c, robot)
+    config.check_policy(c)
+    config.check_eval(c)
+    config.check_logger(c)
+    for key in ("sac.total_frames", "sac.num_robots", "sac.batch_size", "sac.hidden", "sac.buffer_size"):
+        c.integer(key)
+    c.integer("sac.init_random_frames", minimum=0)
+    for key in ("sac.lr", "sac.updates_per_frame", "sac.tau"):
+        c.positive(key)
+    c.fraction("sac.gamma")
+    if list(c.cfg.settings) != ["normal"]:
+        c.fail(f"the SAC recipe runs the normal setting only, got settings={list(c.cfg.settings)}")
+
+
+def plan(cfg, robot) -> list[stages.Stage]:
+    """Experts -> gait policy -> its check -> per main task: a SAC agent, and its evaluation on every task of the
+    same kind (the main task and its generalisation variants)."""
+    from hierloco.envs.robots import robot_fingerprint
+
+    experts = stages.experts_stage(cfg, robot_fingerprint(robot))
+    policy = stages.gait_policy_stage(cfg, experts)
+    low_level = stages.latent_low_level(policy)
+    planned = [experts, policy, stages.gait_policy_check_stage(cfg, policy)]
+    specs = stages.task_specs(cfg)
+    for name in cfg.eval.tasks:
+        agent = sac_stage(cfg, name, specs[name], low_level)
+        planned.append(agent)
+        for other, spec in specs.items():
+            if task_kind(other, spec) == task_kind(name, specs[name]):
+                planned.append(sac_evaluation_stage(cfg, other, spec, agent))
+    return planned
+
+
+def task_kind(name: str, spec: dict) -> str:
+    return (spec or {}).get("task", name)
+
+
+def sac_stage(cfg, name: str, spec: dict, low_level: dict) -> stages.Stage:
+    params = {"seed": cfg.seed, "device": cfg.device, "task_name": name, "task": spec, **section(cfg, "sac")}
+    return stages.Stage(f"sac_{name}", params, {"low_level": low_level}, f"sac_{name}.pt", SACAgent,
+                        None)  # built by the training loop in train.py
+
+
+def sac_evaluation_stage(cfg, name: str, spec: dict, agent: stages.Stage) -> stages.Stage:
+    params = {"seed": cfg.seed, "setting": "normal", "task_name": name, "task": spec}
+    after = {"agent": agent.digest}
+    key_digest = stages.digest({"params": params, "after": after})
+    return stages.Stage(f"evaluation_normal_{name}", params, after, f"evaluation/normal/{name}-{key_digest}.npz",
+                        stages.TaskEvaluation, build_evaluation)
 
 
 def training_task(task: Task) -> Task:
@@ -53,55 +90,14 @@ def training_task(task: Task) -> Task:
     return half
 
 
-def task_env(low_level, task: Task, num_robots: int, seed: int, record: bool = False) -> TransformedEnv:
+def task_env(low_level, task: Task, num_robots: int, seed: int, nthread: int | None = None) -> TransformedEnv:
     """``num_robots`` robots on ``task``, robot ``b`` on episode ``b % episodes``, with the goal observation."""
     episodes = torch.arange(num_robots) % task.num_episodes
-    env = LatentActionEnv(low_level, num_robots=num_robots, record=record, seed=seed)
+    env = LatentActionEnv(low_level, num_robots=num_robots, seed=seed, nthread=nthread)
     return TransformedEnv(env, Compose(TaskTransform(task, episodes), GoalObservation(task)))
 
 
-def train_sac(cfg, low_level, task: Task, logger, tag: str) -> tuple[SACAgent, dict]:
-    """Trains a goal-conditioned SAC high level on ``task`` for ``sac.total_frames`` actions."""
-    s = cfg.sac
-    torch.manual_seed(cfg.seed)
-    agent = SACAgent.build(GoalObservation.SIZE, low_level.action_low, low_level.action_high, hidden=s.hidden,
-                           lr=s.lr, gamma=s.gamma, tau=s.tau, seed=cfg.seed)
-    env = task_env(low_level, task, s.num_robots, cfg.seed)
-    collector = Collector(env, agent.actor, frames_per_batch=s.num_robots, total_frames=s.total_frames,
-                          init_random_frames=s.init_random_frames, auto_register_policy_transforms=False)
-    buffer = ReplayBuffer(storage=LazyTensorStorage(s.buffer_size), batch_size=s.batch_size)
-    start, frames, updates, returns = time.perf_counter(), 0, 0, []
-    bar = tqdm(total=s.total_frames, desc=f"SAC {tag}", disable=not cfg.progress)
-    for batch in collector:
-        buffer.extend(batch.reshape(-1))
-        frames += batch.numel()
-        bar.update(batch.numel())
-        reward = float(batch["next", "reward"].mean())
-        returns.append(reward)
-        if frames >= s.init_random_frames:
-            for _ in range(max(1, int(round(s.updates_per_frame * batch.numel())))):
-                info = agent.update(buffer.sample())
-                updates += 1
-            logger.log_metrics({f"train/sac_{tag}/reward": reward, **{f"train/sac_{tag}/{k}": v
-                                                                       for k, v in info.items()}}, step=frames)
-    collector.shutdown()
-    bar.close()
-    env.close()
-    window = max(1, len(returns) // 10)
-    return agent, {"frames": frames, "updates": updates, "train_seconds": time.perf_counter() - start,
-                   "first_reward": float(np.mean(returns[:window])), "last_reward": float(np.mean(returns[-window:]))}
-
-
-def evaluate_sac(cfg, run, agent: SACAgent, low_level, name: str, task: Task, logger) -> list:
-    """The trained policy (its mean action) on every target of ``task``; result rows."""
-    env = LatentActionEnv(low_level, num_robots=task.num_episodes, record=True, seed=cfg.seed)
-    policy = _Deterministic(agent)
-    rollout = run_task(env, policy, task, transforms=[GoalObservation(task)], progress=cfg.progress)
-    env.close()
-    return pipeline.report_task(cfg, run, METHOD, "normal", name, task, rollout, logger, low_level.steps_per_action)
-
-
-class _Deterministic:
+class DeterministicPolicy:
     """The actor acting with the mode of its action distribution (no exploration), for evaluation."""
 
     def __init__(self, agent: SACAgent):
@@ -109,7 +105,23 @@ class _Deterministic:
 
     @torch.no_grad()
     def __call__(self, tensordict):
-        from tensordict.nn import InteractionType, set_interaction_type
-
         with set_interaction_type(InteractionType.DETERMINISTIC):
             return self.actor(tensordict)
+
+
+def build_evaluation(run, params, agent: SACAgent, low_level) -> stages.TaskEvaluation:
+    """The trained policy (its mean action) on every target of a task, one robot per episode."""
+    task = make_task_from_spec(params["task_name"], params["task"])
+    env = LatentActionEnv(low_level, num_robots=task.num_episodes, record=True, seed=params["seed"],
+                          nthread=run.nthread)
+    try:
+        rollout = run_task(env, DeterministicPolicy(agent), task, transforms=[GoalObservation(task)],
+                           progress=run.progress)
+    finally:
+        env.close()
+    return report.task_evaluation(rollout, task, method=run.method, robot=run.robot.name, setting="normal",
+                                  seed=params["seed"])
+
+
+def manifest(cfg, robot) -> dict:
+    return {"low_level": {"kind": "latent"}}

@@ -60,14 +60,15 @@ def test_checkpoint_round_trip(tmp_path):
     agent = SACAgent.build(7, LOW, HIGH, hidden=16, seed=3)
     agent.update(_bandit_batch(agent, 32, lambda o: o[:, :2], torch.Generator().manual_seed(2)))
     path = tmp_path / "sac.pt"
-    agent.save(path, {"frames": 32})
-    loaded, metadata = SACAgent.load(path)
+    agent.metadata = {"frames": 32}
+    agent.save(path)
+    loaded = SACAgent.load(path)
     obs = TensorDict({"goal_observation": torch.randn(8, 7)}, batch_size=[8])
     from tensordict.nn import InteractionType, set_interaction_type
 
     with set_interaction_type(InteractionType.DETERMINISTIC):
         torch.testing.assert_close(loaded.actor(obs.clone())["action"], agent.actor(obs.clone())["action"])
-    assert metadata == {"frames": 32}
+    assert loaded.metadata == {"frames": 32}
     path.write_bytes(path.read_bytes()[:300])
     with pytest.raises(ArtifactError, match="corrupted"):
         SACAgent.load(path)

@@ -1,4 +1,5 @@
-"""The LAT recipe end to end with the tiny preset: outputs, cached stages, refusals (SPEC 9, 11)."""
+"""The LAT recipe end to end with the tiny preset: outputs, cached stages, refusals, evaluation of a trained run,
+locking, interrupts and resumes."""
 
 import csv
 import json
@@ -33,7 +34,7 @@ def test_outputs(tiny_run):
     with open(run_dir / "results.csv", newline="") as f:
         rows = list(csv.DictReader(f))
     assert list(rows[0]) == COLUMNS
-    tasks = {"velocity_tracking", "goal_reaching", "trajectory_tracking", "goal_reaching_1.5m", "goal_reaching_3m",
+    tasks = {"velocity_tracking", "goal_reaching", "trajectory_tracking", "goal_reaching_1p5m", "goal_reaching_3m",
              "velocity_tracking_diagonal"}
     assert {(r["setting"], r["task"]) for r in rows} == {(s, t) for s in ("normal", "legs_disabled") for t in tasks}
     assert all(r["method"] == "lat" and r["robot"] == "a1" and float(r["normalized_cost"]) >= 0 for r in rows)
@@ -51,20 +52,21 @@ def test_outputs(tiny_run):
 
 def test_rerun_reuses_every_stage(tiny_run):
     run_dir, _ = tiny_run
-    before = {p.name: p.stat().st_mtime_ns for p in run_dir.glob("*.npz")}
+    before = {p.name: p.stat().st_mtime_ns for p in run_dir.rglob("*.npz")}
     result = run(f"run_dir={run_dir}", "settings=[normal,legs_disabled]")
     assert result.returncode == 0, result.stderr[-3000:]
     report = json.loads((run_dir / "report.json").read_text())
     assert all(report["reused_stages"].values()), report["reused_stages"]
-    assert before == {p.name: p.stat().st_mtime_ns for p in run_dir.glob("*.npz")}
+    assert before == {p.name: p.stat().st_mtime_ns for p in run_dir.rglob("*.npz")}
 
 
 def test_another_config_is_refused_without_overwriting(tiny_run):
     run_dir, _ = tiny_run
     experts = (run_dir / "experts.npz").read_bytes()
     result = run(f"run_dir={run_dir}", "experts.num_experts=5")
-    assert result.returncode != 0
+    assert result.returncode == 2
     assert "another config" in result.stderr and "num_experts" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1, result.stderr
     assert (run_dir / "experts.npz").read_bytes() == experts
 
 
@@ -76,7 +78,7 @@ def test_corrupted_artifact_is_named(tiny_run, tmp_path):
     policy = copy / "gait_policy.pt"
     policy.write_bytes(policy.read_bytes()[:500])
     result = run(f"run_dir={copy}")
-    assert result.returncode != 0 and "corrupted" in result.stderr and "gait_policy.pt" in result.stderr
+    assert result.returncode == 2 and "corrupted" in result.stderr and "gait_policy.pt" in result.stderr
 
 
 @pytest.mark.parametrize("override, message", [("robot=spot", "unknown robot"),
@@ -86,7 +88,8 @@ def test_corrupted_artifact_is_named(tiny_run, tmp_path):
 def test_bad_config_is_refused_before_any_work(tmp_path, override, message):
     run_dir = tmp_path / "never"
     result = run(f"run_dir={run_dir}", override)
-    assert result.returncode != 0 and message in result.stderr
+    assert result.returncode == 2 and message in result.stderr, result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1, result.stderr
     assert not run_dir.exists()
 
 
@@ -98,3 +101,147 @@ def test_same_seed_same_numbers(tiny_run, tmp_path):
     assert result.returncode == 0, result.stderr[-3000:]
     assert (again / "episodes.csv").read_text() == (run_dir / "episodes.csv").read_text()
     assert (again / "experts.npz").read_bytes() == (run_dir / "experts.npz").read_bytes()
+
+
+def artifact_bytes(run_dir: Path) -> dict:
+    """Every training artifact and its key, by relative path."""
+    return {str(p.relative_to(run_dir)): p.read_bytes() for p in sorted(run_dir.rglob("*"))
+            if p.is_file() and p.suffix in (".npz", ".pt", ".json") and "evaluation" not in str(p.relative_to(run_dir))
+            and p.name != "report.json"}
+
+
+def test_evaluate_adds_a_task_without_touching_training(tiny_run, tmp_path):
+    import shutil
+
+    copy = tmp_path / "run"
+    shutil.copytree(tiny_run[0], copy)
+    before = artifact_bytes(copy)
+    results = (copy / "results.csv").read_bytes()
+    result = subprocess.run([sys.executable, str(ROOT / "recipes" / "lat" / "evaluate.py"), f"run_dir={copy}",
+                             "name=far", "progress=false", "eval.videos=[]",
+                             "+eval.tasks.goal_reaching_5m={task: goal_reaching, radius: 5.0, num_goals: 2, "
+                             "num_steps: 3}"], cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert artifact_bytes(copy) == before and (copy / "results.csv").read_bytes() == results
+    rows = list(csv.DictReader(open(copy / "evaluations" / "far" / "results.csv")))
+    assert {r["task"] for r in rows} >= {"goal_reaching_5m", "goal_reaching"}
+    new = [p for p in (copy / "evaluation" / "normal").iterdir() if p.name.startswith("goal_reaching_5m-")]
+    assert len(new) == 2  # the cached evaluation and its key
+    # a training change is refused: evaluate.py never trains
+    refused = subprocess.run([sys.executable, str(ROOT / "recipes" / "lat" / "evaluate.py"), f"run_dir={copy}",
+                              "policy.epochs=3"], cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert refused.returncode == 2 and "evaluate.py changes only" in refused.stderr
+
+
+def test_a_finished_run_renders_a_video_it_did_not_render(tmp_path):
+    run_dir = tmp_path / "run"
+    first = run(f"run_dir={run_dir}", "eval.videos=[]", "eval.generalization=null")
+    assert first.returncode == 0, first.stderr[-3000:]
+    assert not (run_dir / "videos").exists()
+    again = run(f"run_dir={run_dir}", "eval.videos=[trajectory_tracking]", "eval.generalization=null")
+    assert again.returncode == 0, again.stderr[-3000:]
+    report = json.loads((run_dir / "report.json").read_text())
+    assert all(report["reused_stages"].values())  # nothing re-evaluated: drawn from the recorded episode
+    assert (run_dir / "videos" / "normal_trajectory_tracking.mp4").stat().st_size > 1000
+
+
+@pytest.mark.parametrize("content", ["[]", "{", '{"a": 1}'])
+def test_a_bad_json_artifact_is_refused_before_outputs_are_rewritten(tiny_run, tmp_path, content):
+    import shutil
+
+    copy = tmp_path / "run"
+    shutil.copytree(tiny_run[0], copy)
+    (copy / "gait_policy_check.json").write_text(content)
+    outputs = {name: (copy / name).read_bytes() for name in ("results.csv", "episodes.csv", "results.md",
+                                                               "report.json")}
+    result = run(f"run_dir={copy}", "settings=[normal,legs_disabled]")
+    assert result.returncode == 2 and "gait_policy_check.json" in result.stderr, result.stderr
+    assert {name: (copy / name).read_bytes() for name in outputs} == outputs
+
+
+def test_a_bad_evaluation_is_refused(tiny_run, tmp_path):
+    import shutil
+
+    copy = tmp_path / "run"
+    shutil.copytree(tiny_run[0], copy)
+    evaluation = next((copy / "evaluation" / "normal").glob("goal_reaching-*.npz"))
+    from hierloco.io import load_arrays, save_arrays
+
+    arrays, meta = load_arrays(evaluation)
+    save_arrays(evaluation, arrays, {**meta, "rows": []})
+    result = run(f"run_dir={copy}", "settings=[normal,legs_disabled]")
+    assert result.returncode == 2 and "no episodes" in result.stderr and evaluation.name in result.stderr
+
+
+def _wait_for(predicate, timeout=300.0):
+    import time
+
+    start = time.time()
+    while not predicate():
+        assert time.time() - start < timeout, "timed out"
+        time.sleep(0.2)
+
+
+def test_a_second_run_into_the_same_directory_is_refused_at_once(tmp_path):
+    run_dir = tmp_path / "run"
+    env = {**os.environ, "WANDB_MODE": "offline"}
+    first = subprocess.Popen([sys.executable, str(TRAIN), "preset=tiny", "progress=false", f"run_dir={run_dir}",
+                              "policy.epochs=20"], cwd=ROOT, env=env, stdout=subprocess.DEVNULL,
+                             stderr=subprocess.DEVNULL)
+    try:
+        _wait_for(lambda: (run_dir / "experts.npz.key.json").exists())
+        second = run(f"run_dir={run_dir}", "policy.epochs=21")
+        assert second.returncode == 2 and f"in use by pid {first.pid}" in second.stderr, second.stderr
+        assert "policy.epochs=20" in second.stderr  # the holder's command
+    finally:
+        first.kill()
+        first.wait()
+
+
+def test_interrupt_says_where_and_rerun_resumes_identically(tiny_run, tmp_path):
+    import signal
+
+    run_dir = tmp_path / "run"
+    process = subprocess.Popen([sys.executable, str(TRAIN), "preset=tiny", "progress=false", f"run_dir={run_dir}",
+                                "settings=[normal,legs_disabled]"], cwd=ROOT, stdout=subprocess.DEVNULL,
+                               stderr=subprocess.PIPE, text=True)
+    _wait_for(lambda: (run_dir / "dynamics_data_normal.npz.key.json").exists())
+    process.send_signal(signal.SIGINT)
+    _, stderr = process.communicate(timeout=120)
+    assert process.returncode == 130
+    assert len(stderr.strip().splitlines()) == 1 and "interrupted in stage 'dynamics_" in stderr, stderr
+    assert "run the same command again to resume" in stderr
+    resumed = run(f"run_dir={run_dir}", "settings=[normal,legs_disabled]")
+    assert resumed.returncode == 0, resumed.stderr[-2000:]
+    assert (run_dir / "episodes.csv").read_text() == (tiny_run[0] / "episodes.csv").read_text()
+
+
+def test_sigkill_then_resume_is_byte_identical(tiny_run, tmp_path):
+    import signal
+
+    run_dir = tmp_path / "run"
+    process = subprocess.Popen([sys.executable, str(TRAIN), "preset=tiny", "progress=false", f"run_dir={run_dir}",
+                                "settings=[normal,legs_disabled]"], cwd=ROOT, stdout=subprocess.DEVNULL,
+                               stderr=subprocess.DEVNULL)
+    _wait_for(lambda: (run_dir / "dynamics_model_normal.pt.key.json").exists())
+    process.send_signal(signal.SIGKILL)
+    process.wait()
+    resumed = run(f"run_dir={run_dir}", "settings=[normal,legs_disabled]")
+    assert resumed.returncode == 0, resumed.stderr[-2000:]
+    assert artifact_bytes(run_dir).keys() == artifact_bytes(tiny_run[0]).keys()
+    for name, content in artifact_bytes(tiny_run[0]).items():
+        if name not in ("run.json", ".lock"):
+            assert artifact_bytes(run_dir)[name] == content, name
+    assert (run_dir / "results.csv").read_bytes() == (tiny_run[0] / "results.csv").read_bytes()
+    assert not [p for p in run_dir.rglob(".*") if ".tmp" in p.name], "a killed write's temporary file was left"
+
+
+def test_a_sweep_gives_each_job_its_own_run_directory(tmp_path):
+    env = {**os.environ, "WANDB_MODE": "offline"}
+    result = subprocess.run([sys.executable, str(TRAIN), "-m", "preset=tiny", "progress=false", "eval.videos=[]",
+                             "eval.generalization=null", "eval.figures=false",
+                             "planner.name=random_shooting,cem"], cwd=tmp_path, env=env, capture_output=True,
+                            text=True, timeout=900)
+    assert result.returncode == 0, result.stderr[-3000:]
+    runs = sorted(p.parent.name for p in (tmp_path / "outputs" / "lat" / "tiny").rglob("results.csv"))
+    assert runs == ["planner.name=cem", "planner.name=random_shooting"]

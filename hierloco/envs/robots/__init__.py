@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from hierloco.envs.robots.a1 import A1
 from hierloco.envs.robots.daisy import DAISY
+from hierloco.envs.robots.fingerprint import robot_fingerprint
 from hierloco.envs.robots.mjcf import robot_from_mjcf
 from hierloco.envs.robots.spec import (
     CONTROL_TIMESTEP,
@@ -45,5 +46,5 @@ register_robot(DAISY)
 __all__ = [
     "A1", "DAISY", "ROBOTS", "CONTROL_TIMESTEP", "LOCK_PREFIX", "TOUCH_SENSOR_PREFIX", "PHYSICS_STEPS_PER_CONTROL",
     "PHYSICS_TIMESTEP", "START_YAW", "Leg", "Obstacle", "RobotSpec", "compile_model", "get_robot",
-    "joint_qpos_indices", "joint_qvel_indices", "register_robot", "robot_from_mjcf", "standing_qpos",
+    "joint_qpos_indices", "joint_qvel_indices", "register_robot", "robot_fingerprint", "robot_from_mjcf", "standing_qpos",
 ]

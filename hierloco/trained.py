@@ -1,0 +1,138 @@
+"""Trained runs: assemble the parts of the hierarchy (low level, world model, planner) from a run's artifacts.
+
+:func:`load_run` opens a run directory written by a recipe (``recipes/<method>/train.py``) and gives, for new
+research code, the trained low level, the learned CoM world model of a setting and an MPC planner over it, without
+running any recipe code. :func:`make_world_model` and :func:`make_planner` are the factories the recipes use too.
+
+Example:
+    >>> run = load_run("outputs/lat/paper/a1_seed0")  # doctest: +SKIP
+    >>> low_level = run.low_level()                    # pi(., z), for any number of robots
+    >>> planner = run.planner(GoalReaching())          # random shooting over z with the learned model
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from hierloco.io import ArtifactError, check_schema
+
+MANIFEST = "run.json"
+PLANNER_OPTIONS = {"random_shooting": (), "cem": ("optim_steps", "top_k"), "mppi": ("optim_steps", "temperature"),
+                   "exhaustive": ()}
+
+
+def make_world_model(model, low_level, *, task=None, device: str = "cpu"):
+    """The :class:`~hierloco.envs.world_model.CoMWorldModelEnv` of a trained CoM ``model`` (a
+    :class:`~hierloco.components.com_model.CoMDynamicsModel`) over ``low_level``'s action space (a box, or a finite
+    set of choices with the low level's action features)."""
+    from hierloco.envs.world_model import CoMWorldModelEnv
+
+    net = model.to(device).eval()
+    if low_level.num_choices is not None:
+        return CoMWorldModelEnv(net, num_choices=low_level.num_choices, action_features=low_level.action_features,
+                                task=task, device=device)
+    return CoMWorldModelEnv(net, action_low=low_level.action_low, action_high=low_level.action_high,
+                            action_features=low_level.action_features, task=task, device=device)
+
+
+def make_planner(world_model, *, name: str = "random_shooting", horizon: int = 1, num_candidates: int = 8000,
+                 seed: int = 0, **options):
+    """An MPC planner by name (``random_shooting``, ``cem``, ``mppi``, ``exhaustive``) over ``world_model``.
+
+    ``options`` are the planner's own (``optim_steps`` and ``top_k`` for CEM, ``optim_steps`` and ``temperature``
+    for MPPI); options of other planners are ignored, so one config section serves every planner."""
+    from hierloco.components.planners import PLANNERS
+
+    if name not in PLANNERS:
+        raise ValueError(f"unknown planner {name!r} (planners: {', '.join(PLANNERS)})")
+    if name == "exhaustive":
+        return PLANNERS[name](world_model, planning_horizon=horizon)
+    own = {key: options[key] for key in PLANNER_OPTIONS[name] if key in options}
+    return PLANNERS[name](world_model, planning_horizon=horizon, num_candidates=num_candidates, seed=seed, **own)
+
+
+@dataclass
+class TrainedRun:
+    """The trained parts of a run directory. Build them with :meth:`low_level`, :meth:`world_model`,
+    :meth:`planner`; ``manifest`` is what the recipe recorded (method, robot, settings, planner, ...)."""
+
+    path: Path
+    manifest: dict
+    _cache: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def method(self) -> str:
+        return self.manifest["method"]
+
+    @property
+    def robot(self):
+        from hierloco.envs.robots import get_robot
+
+        return get_robot(self.manifest["robot"])
+
+    @property
+    def settings(self) -> list[str]:
+        return list(self.manifest["settings"])
+
+    def _artifact(self, name: str) -> Path:
+        path = self.path / name
+        if not path.exists():
+            raise ArtifactError(f"{self.path} has no {name}: the {self.method} run did not finish that stage")
+        return path
+
+    def low_level(self, num_robots: int = 1):
+        """The trained low level (LAT: ``pi(., z)``; LIB: expert replay; IK: the expert controller for
+        ``num_robots`` robots; SAC-SAC: the SAC velocity policy)."""
+        kind = self.manifest["low_level"]["kind"]
+        if kind == "latent":
+            from hierloco.components.gait_policy import TrainedGaitPolicy
+            from hierloco.components.low_level import LatentLowLevel
+
+            return LatentLowLevel(TrainedGaitPolicy.load(self._artifact("gait_policy.pt")), self.robot)
+        if kind == "expert_replay":
+            from hierloco.components.expert_library import ExpertLibrary
+            from hierloco.components.low_level import ExpertReplayLowLevel
+
+            return ExpertReplayLowLevel(ExpertLibrary.load(self._artifact("experts.npz")))
+        if kind == "command":
+            from hierloco.components.low_level import CommandLowLevel
+
+            options = self.manifest["low_level"]["options"]
+            return CommandLowLevel(self.robot, num_robots, **options)
+        raise ArtifactError(f"{self.path / MANIFEST}: unknown low level kind {kind!r}")
+
+    def com_model(self, setting: str = "normal"):
+        """The trained :class:`~hierloco.components.com_model.TrainedCoMModel` of ``setting``."""
+        from hierloco.components.com_model import TrainedCoMModel
+
+        if setting not in self.settings:
+            raise ValueError(f"{self.path} was trained for settings {self.settings}, not {setting!r}")
+        return TrainedCoMModel.load(self._artifact(f"dynamics_model_{setting}.pt"))
+
+    def world_model(self, setting: str = "normal", task=None, device: str = "cpu"):
+        """The learned CoM world model env of ``setting``, scoring with ``task`` (a :class:`hierloco.envs.Task`)."""
+        return make_world_model(self.com_model(setting).model, self.low_level(), task=task, device=device)
+
+    def planner(self, task=None, setting: str = "normal", device: str = "cpu", **overrides):
+        """The run's MPC planner (its recorded settings, changed by ``overrides``) over :meth:`world_model`."""
+        options = {**self.manifest["planner"], **overrides}
+        return make_planner(self.world_model(setting, task, device), seed=self.manifest["seed"], **options)
+
+
+def load_run(run_dir: str | os.PathLike) -> TrainedRun:
+    """Opens the run directory of a finished (or partly finished) model-based recipe run (LAT, LIB, IK)."""
+    path = Path(run_dir)
+    manifest_path = path / MANIFEST
+    if not manifest_path.exists():
+        raise ArtifactError(f"{path} is not a hierloco run directory (no {MANIFEST}); run a recipe into it first")
+    try:
+        manifest: Any = json.loads(manifest_path.read_text())
+    except (OSError, json.JSONDecodeError) as error:
+        raise ArtifactError(f"corrupted run manifest {manifest_path}: {error}") from error
+    check_schema(manifest, {"method": str, "robot": str, "seed": int, "settings": list, "planner": dict,
+                            "low_level": {"kind": str}}, f"corrupted run manifest {manifest_path}")
+    return TrainedRun(path, manifest)

@@ -1,0 +1,251 @@
+"""Config checks of the recipes: the whole config is read and checked before any work, task options included.
+
+:func:`prepare` normalises what users type (``settings=normal`` is the one-item list ``[normal]``) and collects every
+problem into one :class:`ConfigError`; recipes add their own checks through ``extra``. Only recipe code reads the
+config: the library takes keyword arguments.
+"""
+
+from __future__ import annotations
+
+import inspect
+import math
+from typing import Any, Callable, Iterable
+
+from omegaconf import DictConfig, ListConfig, OmegaConf, open_dict
+
+SETTINGS = ("normal", "legs_disabled")
+CONTINUOUS_PLANNERS = ("random_shooting", "cem", "mppi")
+LIST_OPTIONS = ("settings", "eval.videos", "logger.backends")
+
+
+class ConfigError(ValueError):
+    """A config a recipe cannot run: the message names every problem."""
+
+
+def section(cfg: DictConfig, name: str) -> dict:
+    return OmegaConf.to_container(cfg[name], resolve=True)
+
+
+def get(cfg: DictConfig, dotted: str, default: Any = None) -> Any:
+    return OmegaConf.select(cfg, dotted, default=default)
+
+
+def as_lists(cfg: DictConfig, options: Iterable[str]) -> None:
+    """A list option given a scalar (``settings=normal``) becomes a one-item list; ``null`` stays ``null``."""
+    with open_dict(cfg):
+        for dotted in options:
+            value = OmegaConf.select(cfg, dotted)
+            if value is not None and not isinstance(value, ListConfig):
+                OmegaConf.update(cfg, dotted, [value], merge=False)
+
+
+# ---------------------------------------------------------------------------------------------------- values
+def _is_int(value) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _is_number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+class Checker:
+    """Collects problems about config values, each naming its key."""
+
+    def __init__(self, cfg: DictConfig):
+        self.cfg = cfg
+        self.problems: list[str] = []
+
+    def fail(self, message: str) -> None:
+        self.problems.append(message)
+
+    def integer(self, dotted: str, minimum: int = 1) -> None:
+        value = get(self.cfg, dotted)
+        if not (_is_int(value) and value >= minimum):
+            self.fail(f"{dotted} must be an integer >= {minimum}, got {value!r}")
+
+    def positive(self, dotted: str) -> None:
+        value = get(self.cfg, dotted)
+        if not (_is_number(value) and value > 0):
+            self.fail(f"{dotted} must be a positive number, got {value!r}")
+
+    def fraction(self, dotted: str) -> None:
+        value = get(self.cfg, dotted)
+        if not (_is_number(value) and 0 < value < 1):
+            self.fail(f"{dotted} must be a number in (0, 1), got {value!r}")
+
+    def choice(self, dotted: str, choices: Iterable[str], what: str) -> None:
+        value = get(self.cfg, dotted)
+        choices = tuple(choices)
+        if value not in choices:
+            self.fail(f"unknown {what} {value!r} ({dotted}: choose from {', '.join(choices)})")
+
+    def raise_if_any(self) -> None:
+        if self.problems:
+            raise ConfigError("bad config: " + "; ".join(self.problems))
+
+
+# ---------------------------------------------------------------------------------------------------- tasks
+def make_task_from_spec(name: str, spec: dict):
+    """The task ``name`` of the ``eval`` section: ``spec`` holds its type (``task``, default the name) and options.
+
+    Unknown options and bad values raise :class:`ConfigError` naming the option and the valid ones."""
+    from hierloco.envs.tasks import TASKS
+
+    options = dict(spec or {})
+    kind = options.pop("task", name)
+    if kind not in TASKS:
+        raise ConfigError(f"bad config: unknown task {kind!r} for eval task {name!r} (tasks: {', '.join(TASKS)})")
+    cls = TASKS[kind]
+    parameters = {p: v for p, v in inspect.signature(cls.__init__).parameters.items() if p not in ("self", "name")}
+    accepted = list(parameters)
+    unknown = sorted(set(options) - set(accepted))
+    if unknown:
+        raise ConfigError(f"bad config: eval task {name!r} ({kind}) has no option {', '.join(map(repr, unknown))} "
+                          f"(its options: {', '.join(accepted)})")
+    for option, value in options.items():
+        default = parameters[option].default
+        if _is_number(default) and not _is_number(value):
+            raise ConfigError(f"bad config: eval task {name!r} ({kind}): option {option!r} must be a finite number, "
+                              f"got {value!r}")
+    try:
+        task = cls(**options)
+    except (TypeError, ValueError) as error:
+        raise ConfigError(f"bad config: eval task {name!r} ({kind}): {error}") from None
+    task.name = name
+    return task
+
+
+# ---------------------------------------------------------------------------------------------------- recipes
+def check_common(c: Checker, robot_checks: bool = True) -> Any:
+    """Seed, device, threads, settings, robot; returns the robot description (or ``None`` when it is bad)."""
+    import torch
+
+    from hierloco.envs.robots import get_robot
+
+    cfg = c.cfg
+    c.integer("seed", minimum=0)
+    device = str(get(cfg, "device"))
+    if device not in ("cpu", "cuda") and not device.startswith("cuda:"):
+        c.fail(f"device must be cpu or cuda, got {device!r}")
+    elif device.startswith("cuda") and not torch.cuda.is_available():
+        c.fail("device=cuda asked but no GPU is available")
+    if get(cfg, "nthread") is not None:
+        c.integer("nthread")
+    settings = list(get(cfg, "settings") or [])
+    if not settings:
+        c.fail("settings is empty (give normal and/or legs_disabled)")
+    for setting in settings:
+        if setting not in SETTINGS:
+            c.fail(f"unknown setting {setting!r} (settings: {', '.join(SETTINGS)})")
+    if len(set(settings)) != len(settings):
+        c.fail(f"settings {settings} lists a setting twice")
+    robot = None
+    if robot_checks:
+        try:
+            robot = get_robot(cfg.robot)
+        except (ValueError, FileNotFoundError, OSError) as error:
+            c.fail(str(error))
+    return robot
+
+
+def check_experts(c: Checker, robot, *, library: bool = True) -> None:
+    if library:
+        c.integer("experts.num_experts")
+        c.positive("experts.settle_time")
+    c.integer("steps_per_action")
+    steps = get(c.cfg, "steps_per_action")
+    if robot is not None and _is_int(steps) and steps >= 1:
+        from hierloco.envs.robots import CONTROL_TIMESTEP
+
+        periods = steps * CONTROL_TIMESTEP / robot.gait_period
+        if abs(periods - round(periods)) > 1e-6 or round(periods) < 1:
+            c.fail(f"steps_per_action={steps} ({steps * CONTROL_TIMESTEP:.2f} s) must hold a whole number of "
+                   f"{robot.name}'s {robot.gait_period} s gait periods")
+
+
+def check_policy(c: Checker) -> None:
+    for key in ("policy.hidden", "policy.epochs", "policy.batch_size", "policy.num_harmonics"):
+        c.integer(key)
+    for key in ("policy.lr", "policy.latent_lr"):
+        c.positive(key)
+    decay = get(c.cfg, "policy.latent_weight_decay")
+    if not (_is_number(decay) and decay >= 0):
+        c.fail(f"policy.latent_weight_decay must be a number >= 0, got {decay!r}")
+    dim = get(c.cfg, "policy.latent_dim")
+    if not (_is_int(dim) and 1 <= dim <= 4):
+        c.fail(f"policy.latent_dim must be 2, 3 or 4 (1 also works), got {dim!r}")
+
+
+def check_dynamics(c: Checker) -> None:
+    from hierloco.components.com_model import MIN_TRANSITIONS
+
+    c.integer("dynamics.num_transitions", minimum=MIN_TRANSITIONS)
+    for key in ("dynamics.num_robots", "dynamics.episode_length", "dynamics.hidden", "dynamics.batch_size",
+                "dynamics.patience", "dynamics.max_epochs"):
+        c.integer(key)
+    c.positive("dynamics.lr")
+    c.fraction("dynamics.holdout")
+
+
+def check_planner(c: Checker, planners: Iterable[str]) -> None:
+    planners = tuple(planners)
+    c.choice("planner.name", planners, "planner")
+    c.integer("planner.horizon")
+    if get(c.cfg, "planner.name") != "exhaustive":
+        c.integer("planner.num_candidates")
+        c.integer("planner.optim_steps")
+        c.integer("planner.top_k")
+        c.positive("planner.temperature")
+        top_k, count = get(c.cfg, "planner.top_k"), get(c.cfg, "planner.num_candidates")
+        if get(c.cfg, "planner.name") == "cem" and _is_int(top_k) and _is_int(count) and top_k > count:
+            c.fail(f"planner.top_k={top_k} exceeds planner.num_candidates={count}")
+
+
+def check_eval(c: Checker) -> dict:
+    """Builds every evaluation task (so a misspelt option is caught now); returns name -> task."""
+    from recipes.common.stages import task_specs
+
+    tasks = {}
+    try:
+        specs = task_specs(c.cfg)
+    except Exception as error:  # e.g. a scalar where a mapping belongs
+        c.fail(f"eval.tasks / eval.generalization must map task names to options: {error}")
+        return tasks
+    if not get(c.cfg, "eval.tasks"):
+        c.fail("eval.tasks is empty")
+    for name, spec in specs.items():
+        if not isinstance(spec, dict):
+            c.fail(f"eval task {name!r} must be a mapping of options, got {spec!r}")
+            continue
+        try:
+            tasks[name] = make_task_from_spec(name, spec)
+        except ConfigError as error:
+            c.fail(str(error).removeprefix("bad config: "))
+    for name in get(c.cfg, "eval.videos") or []:
+        if name not in specs:
+            c.fail(f"eval.videos names {name!r}, which is not an evaluated task ({', '.join(specs)})")
+    if not isinstance(get(c.cfg, "eval.figures"), bool):
+        c.fail(f"eval.figures must be true or false, got {get(c.cfg, 'eval.figures')!r}")
+    return tasks
+
+
+def check_logger(c: Checker) -> None:
+    from hierloco.loggers import BACKENDS
+
+    for backend in get(c.cfg, "logger.backends") or []:
+        if backend not in BACKENDS:
+            c.fail(f"unknown logger backend {backend!r} (backends: {', '.join(BACKENDS)})")
+    c.choice("logger.wandb_mode", ("offline", "online"), "wandb mode")
+
+
+def prepare(cfg: DictConfig, checks: Callable[[Checker, Any], None] | None = None, *,
+            list_options: Iterable[str] = LIST_OPTIONS) -> Any:
+    """Normalises ``cfg`` in place and checks it all (common parts, then the recipe's ``checks(checker, robot)``);
+    raises one :class:`ConfigError` naming every problem. Returns the robot description."""
+    as_lists(cfg, list_options)
+    c = Checker(cfg)
+    robot = check_common(c)
+    if checks is not None:
+        checks(c, robot)
+    c.raise_if_any()
+    return robot

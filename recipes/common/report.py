@@ -1,0 +1,111 @@
+"""Reporting of the recipes: per-task evaluations, their metrics, figures and videos, and the results tables.
+
+Figures and videos are drawn from the evaluations' recordings (CoM paths, foot contacts, joint positions at 100 Hz),
+so a finished run can draw them again, or render a video it did not render before, without re-evaluating.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from hierloco.envs.robots import CONTROL_TIMESTEP
+from hierloco.plots import plot_gait_diagram, plot_latent_map, plot_task_paths, plot_velocity_tracking
+from hierloco.results import TaskEvaluation, episode_rows
+
+VIDEO_FPS = 20
+GAIT_DIAGRAM_ACTIONS = 6
+
+
+def task_evaluation(rollout, task, *, method: str, robot: str, setting: str, seed: int) -> TaskEvaluation:
+    """The :class:`TaskEvaluation` of a closed-loop rollout: rows, metrics and the recording of its episodes."""
+    rows = episode_rows(rollout, method=method, robot=robot, setting=setting, seed=seed)
+    result = rollout.result
+    metrics = {"normalized_cost": float(np.mean(result.normalized_cost)),
+               "final_error": float(np.mean(result.final_error)), "falls": float(rollout.fell.sum()),
+               "plan_seconds": float(rollout.plan_seconds)}
+    if task.has_success:
+        metrics["success_rate"] = float(np.mean(result.success))
+    if hasattr(task, "path_distance") and rollout.com_paths is not None:
+        distance = task.path_distance(rollout.com_paths[..., :2]).mean(1)  # per episode, over 100 Hz samples
+        for row, value in zip(rows, distance):
+            row["path_distance"] = float(value)
+        metrics["path_distance"] = float(distance.mean())
+    recording = {}
+    if rollout.com_paths is not None:
+        recording = {"com_paths": rollout.com_paths.astype(np.float32), "foot_contacts": rollout.foot_contacts,
+                     "qpos": rollout.qpos[:1]}
+    return TaskEvaluation(rows, metrics, recording, {"task": task.name, "setting": setting, "method": method,
+                                                     "robot": robot, "seed": int(seed)})
+
+
+def metric_name(name: str) -> str:
+    """A task name as a clean metric path component (``goal_reaching_1.5m`` -> ``goal_reaching_1p5m``)."""
+    return name.replace(".", "p").replace("/", "_")
+
+
+def log_evaluation(logger, evaluation: TaskEvaluation, setting: str, name: str) -> None:
+    prefix = f"eval/{setting}/{metric_name(name)}"
+    logger.log_metrics({f"{prefix}/{key}": value for key, value in evaluation.metrics.items()
+                        if key != "plan_seconds"})
+    logger.log_scalar(f"time/{setting}/{metric_name(name)}/plan_seconds", evaluation.metrics["plan_seconds"])
+
+
+def task_figures(evaluation: TaskEvaluation, task, robot, figures: Path, *, method: str, setting: str,
+                 steps_per_action: int) -> list[Path]:
+    """The paths figure of a task, plus the velocity plot (velocity tracking) and the gait diagram (goal
+    reaching); returns the files written. Needs the evaluation's recording."""
+    recording = evaluation.recording
+    if "com_paths" not in recording:
+        return []
+    name = task.name
+    title = f"{method.upper()} {robot.name} ({setting}): {name}"
+    paths = [figures / f"{setting}_{name}_paths.png"]
+    plot_task_paths(task, recording["com_paths"], paths[0], title=title)
+    if name == "velocity_tracking":
+        paths.append(figures / f"{setting}_{name}_velocity.png")
+        plot_velocity_tracking(task, recording["com_paths"][0], paths[-1], title=title)
+    if name == "goal_reaching":
+        paths.append(figures / f"{setting}_gait_during_{name}.png")
+        plot_gait_diagram(recording["foot_contacts"][0, : GAIT_DIAGRAM_ACTIONS * steps_per_action], robot.leg_names,
+                          paths[-1], action_steps=steps_per_action,
+                          title=f"{method.upper()} {robot.name} ({setting}): gait during {name} (pink stance, blue "
+                                "swing; dashed: new action)")
+    return paths
+
+
+def task_video(evaluation: TaskEvaluation, task, robot, path: Path, *, disabled_legs=()) -> np.ndarray | None:
+    """Renders the first episode of a task (MuJoCo offscreen, 20 fps) with its goals or path drawn on the floor;
+    returns the frames (``T x H x W x 3``), or ``None`` when the evaluation kept no joint positions."""
+    from hierloco.render import render_frames, save_video
+
+    qpos = evaluation.recording.get("qpos")
+    if qpos is None or not len(qpos):
+        return None
+    stride = int(round(1.0 / (VIDEO_FPS * CONTROL_TIMESTEP)))
+    markers = getattr(task, "goals", None)
+    markers = markers[:1].numpy() if markers is not None else getattr(task, "references", None)
+    markers = None if markers is None else np.asarray(markers)[:: max(1, len(markers) // 40)]
+    frames = render_frames(robot, qpos[0, ::stride], disabled_legs=disabled_legs, markers=markers)
+    save_video(frames, path, fps=VIDEO_FPS)
+    return frames
+
+
+def latent_map(low_level, robot, path: Path, *, method: str, seed: int) -> Path | None:
+    """The 2-D latent map figure (CoM paths over a grid of actions), only for a 2-D continuous action space."""
+    from hierloco.components.evaluation import latent_grid_paths
+
+    if low_level.action_dim != 2 or low_level.num_choices is not None:
+        return None
+    latents, paths = latent_grid_paths(low_level, seed=seed)
+    plot_latent_map(latents, paths, path, title=f"{method.upper()} {robot.name}: CoM paths over a grid of 2-D "
+                                                "actions (3 s each)")
+    return path
+
+
+def headline(evaluations: dict) -> float:
+    """The mean normalised cost over the evaluated tasks of the first setting (what a sweeper minimises)."""
+    costs = [e.metrics["normalized_cost"] for (setting, _), e in evaluations.items()
+             if setting == next(iter(evaluations))[0]]
+    return float(np.mean(costs)) if costs else float("nan")

@@ -1,0 +1,219 @@
+"""The stages of the model-based pipeline (LAT, LIB, IK, and the LAT low level of SAC), each a cached artifact.
+
+A :class:`Stage` has ``params`` (the values its builder is called with: config values, nothing else) and ``after``
+(the digests of what it depends on: the robot's fingerprint and the upstream stages), which together are its key.
+A builder receives only ``params`` (and the upstream artifacts), so everything that changes an artifact is in its
+key by construction. The ``*_stage`` functions make stages from the config; the ``build_*`` functions build them.
+
+Stages, in order (see ``docs/index.md`` for the paper's steps):
+
+- ``experts``: the expert library (Li et al., Sec. III-A);
+- ``gait_policy``, ``gait_policy_check``: the latent gait policy and its check in simulation (Sec. III-B);
+- ``dynamics_data_<setting>``, ``dynamics_model_<setting>``: CoM dynamics data and model (Sec. III-C);
+- ``evaluation_<setting>_<task>``: closed-loop MPC on one task (Sec. III-D, IV).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import numpy as np
+import torch
+from omegaconf import OmegaConf
+
+from hierloco.components.com_model import TrainedCoMModel, train_com_model
+from hierloco.components.dynamics_data import TransitionData, collect_transitions
+from hierloco.components.evaluation import check_gait_policy, run_task
+from hierloco.components.expert_library import ExpertLibrary, build_expert_library
+from hierloco.components.gait_policy import TrainedGaitPolicy, train_gait_policy
+from hierloco.envs.latent_env import LatentActionEnv
+from hierloco.envs.robots import CONTROL_TIMESTEP
+from hierloco.io import load_json, save_json
+from hierloco.results import TaskEvaluation
+from hierloco.runs import StageSpec, digest
+from hierloco.trained import make_planner, make_world_model
+from recipes.common import report
+from recipes.common.config import make_task_from_spec, section
+
+
+class JsonReport(dict):
+    """A stage artifact that is a JSON object, validated against ``SCHEMA`` when loaded."""
+
+    SCHEMA: dict = {}
+
+    def save(self, path) -> None:
+        save_json(path, dict(self))
+
+    @classmethod
+    def load(cls, path) -> "JsonReport":
+        return cls(load_json(path, cls.SCHEMA))
+
+
+class GaitPolicyCheck(JsonReport):
+    SCHEMA = {"reproduction_error": list, "reproduced_fraction": float, "interpolation_walks": float,
+              "interpolation_between": float}
+
+
+@dataclass(frozen=True)
+class Stage:
+    """One cached stage: ``build(run, params, *inputs)`` makes the artifact (a class with ``save(path)`` and
+    ``load(path)``), stored as ``filename`` beside its key ``{params, after}``."""
+
+    name: str
+    params: dict
+    after: dict
+    filename: str
+    artifact: Any
+    build: Callable
+
+    @property
+    def key(self) -> dict:
+        return {"params": self.params, "after": self.after}
+
+    @property
+    def digest(self) -> str:
+        return digest(self.key)
+
+    @property
+    def spec(self) -> StageSpec:
+        return StageSpec(self.name, self.key, self.filename)
+
+
+# ---------------------------------------------------------------------------------------------------- experts
+def experts_stage(cfg, robot_digest: str) -> Stage:
+    params = {"seed": cfg.seed, "steps_per_action": cfg.steps_per_action, **section(cfg, "experts")}
+    return Stage("experts", params, {"robot": robot_digest}, "experts.npz",
+                 ExpertLibrary, build_experts)
+
+
+def build_experts(run, params) -> ExpertLibrary:
+    """The expert library, checked to walk as commanded (Li et al., Sec. III-A)."""
+    return build_expert_library(run.robot, params["num_experts"], steps_per_action=params["steps_per_action"],
+                                seed=params["seed"], settle_time=params["settle_time"], progress=run.progress)
+
+
+# ---------------------------------------------------------------------------------------------------- gait policy
+def gait_policy_stage(cfg, experts: Stage) -> Stage:
+    params = {"seed": cfg.seed, "device": cfg.device, **section(cfg, "policy")}
+    return Stage("gait_policy", params, {"experts": experts.digest}, "gait_policy.pt", TrainedGaitPolicy,
+                 build_gait_policy)
+
+
+def build_gait_policy(run, params, library: ExpertLibrary) -> TrainedGaitPolicy:
+    """``pi(t, z)`` and one latent per expert, fitted jointly to the experts (Li et al., Sec. III-B)."""
+    p = dict(params)
+    periods = int(round(library.steps_per_action * CONTROL_TIMESTEP / run.robot.gait_period))
+    trained = train_gait_policy(library.joint_targets, periods_per_action=periods, progress=run.progress, **p)
+    run.logger.log_scalar("train/gait_policy/rmse", trained.metadata["rmse"], step=p["epochs"])
+    return trained
+
+
+def gait_policy_check_stage(cfg, policy: Stage) -> Stage:
+    return Stage("gait_policy_check", {"seed": cfg.seed, "num_pairs": 50, "num_actions": 4},
+                 {"gait_policy": policy.digest}, "gait_policy_check.json", GaitPolicyCheck, build_gait_policy_check)
+
+
+def build_gait_policy_check(run, params, low_level, library: ExpertLibrary) -> GaitPolicyCheck:
+    """Reproduction of every expert and interpolation between pairs by ``pi(., z)``, in simulation."""
+    latents = low_level.trained.latents.numpy()
+    return GaitPolicyCheck(check_gait_policy(low_level, library, latents, **params))
+
+
+def latent_low_level(policy: Stage) -> dict:
+    """The key of LAT's low level ``pi(., z)``: the gait policy it runs."""
+    return {"kind": "latent", "gait_policy": policy.digest}
+
+
+# ---------------------------------------------------------------------------------------------------- dynamics
+DATA_KEYS = ("num_transitions", "num_robots", "episode_length")
+MODEL_KEYS = ("hidden", "lr", "batch_size", "holdout", "patience", "max_epochs")
+
+
+def dynamics_data_stage(cfg, low_level: dict, setting: str, robot) -> Stage:
+    d = section(cfg, "dynamics")
+    params = {"seed": cfg.seed, "setting": setting, "disabled_legs": list(disabled_legs(robot, setting)),
+              **{k: d[k] for k in DATA_KEYS}}
+    return Stage(f"dynamics_data_{setting}", params, {"low_level": low_level},
+                 f"dynamics_data_{setting}.npz", TransitionData, build_dynamics_data)
+
+
+def build_dynamics_data(run, params, make_low_level) -> TransitionData:
+    """Random actions held for one action each, chained on many robots (Li et al., Sec. III-C)."""
+    env = LatentActionEnv(make_low_level(params["num_robots"]), num_robots=params["num_robots"],
+                          disabled_legs=params["disabled_legs"], seed=params["seed"], nthread=run.nthread)
+    try:
+        return collect_transitions(env, params["num_transitions"], episode_length=params["episode_length"],
+                                   seed=params["seed"], progress=run.progress)
+    finally:
+        env.close()
+
+
+def dynamics_model_stage(cfg, data: Stage, setting: str) -> Stage:
+    d = section(cfg, "dynamics")
+    params = {"seed": cfg.seed, "device": cfg.device, "duration": cfg.steps_per_action * CONTROL_TIMESTEP,
+              **{k: d[k] for k in MODEL_KEYS}}
+    return Stage(f"dynamics_model_{setting}", params, {"data": data.digest}, f"dynamics_model_{setting}.pt",
+                 TrainedCoMModel, build_dynamics_model)
+
+
+def build_dynamics_model(run, params, data: TransitionData, low_level) -> TrainedCoMModel:
+    """The local-frame delta model ``(dx, dy, dyaw, vx', vy') = f(vx, vy, a)``, early-stopped on held-out data."""
+    features = low_level.action_features(data.action)
+    model = train_com_model(data.com_state, features, data.next_com_state, progress=run.progress, **params)
+    setting = run.current.removeprefix("dynamics_model_")
+    history = model.metadata["heldout_loss_history"]
+    run.logger.log_curve(f"train/dynamics_{setting}", {"heldout_loss": history}, step_name="epoch")
+    return model
+
+
+# ---------------------------------------------------------------------------------------------------- evaluation
+def evaluation_stage(cfg, name: str, spec: dict, setting: str, model: Stage, low_level: dict) -> Stage:
+    """MPC on one task; cached per task and planner (the file name carries the key's digest)."""
+    params = {"seed": cfg.seed, "device": cfg.device, "setting": setting, "task_name": name, "task": spec,
+              "planner": section(cfg, "planner")}
+    after = {"model": model.digest, "low_level": low_level}
+    key_digest = digest({"params": params, "after": after})
+    return Stage(f"evaluation_{setting}_{name}", params, after, f"evaluation/{setting}/{name}-{key_digest}.npz",
+                 TaskEvaluation, build_evaluation)
+
+
+def build_evaluation(run, params, make_low_level, model: TrainedCoMModel) -> TaskEvaluation:
+    """Closed-loop MPC on every episode of a task, one robot per episode, re-planning after every action."""
+    task = make_task_from_spec(params["task_name"], params["task"])
+    low = make_low_level(task.num_episodes)
+    world_model = make_world_model(model.model, low, device=params["device"])
+    planner = make_planner(world_model, seed=params["seed"], **params["planner"])
+    env = LatentActionEnv(low, num_robots=task.num_episodes, disabled_legs=disabled_legs(run.robot, params["setting"]),
+                          record=True, seed=params["seed"], nthread=run.nthread)
+    try:
+        rollout = run_task(env, planner, task, progress=run.progress)
+    finally:
+        env.close()
+    return report.task_evaluation(rollout, task, method=run.method, robot=run.robot.name, setting=params["setting"],
+                                  seed=params["seed"])
+
+
+# ---------------------------------------------------------------------------------------------------- helpers
+def disabled_legs(robot, setting: str) -> tuple[str, ...]:
+    """The legs locked in ``setting``: the rear legs in the adverse setting, none otherwise."""
+    return tuple(robot.rear_legs) if setting == "legs_disabled" else ()
+
+
+def evaluation_stages(cfg, setting: str, model: Stage, low_level: dict) -> list[Stage]:
+    return [evaluation_stage(cfg, name, spec, setting, model, low_level) for name, spec in task_specs(cfg).items()]
+
+
+def task_specs(cfg) -> dict:
+    """Task name -> its spec (``task`` type and options): the main tasks, then the generalisation ones."""
+    specs = {}
+    for group in ("tasks", "generalization"):
+        entries = cfg.eval.get(group)
+        for name, spec in (OmegaConf.to_container(entries, resolve=True) if entries is not None else {}).items():
+            specs[name] = dict(spec or {})
+    return specs
+
+
+def set_seed(seed: int) -> None:
+    torch.manual_seed(seed)
+    np.random.seed(seed)

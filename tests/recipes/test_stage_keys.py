@@ -1,0 +1,123 @@
+"""Cache keys are complete: every config value that changes an artifact is in the key of the stages it changes (and
+of everything downstream), and nothing else is.
+
+Each recipe's plan of stages is computed for its tiny config, then for the config with one value changed; the set
+of stages whose key changed is compared with what must rebuild. (A changed key refuses a training stage and gives
+an evaluation a new cached file; ``test_lat_recipe.py`` checks both end to end.)
+"""
+
+import importlib
+from pathlib import Path
+
+import pytest
+from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf, open_dict
+
+from recipes.common.config import prepare
+
+ROOT = Path(__file__).resolve().parents[2]
+RECIPES = ("lat", "lib", "ik", "sac")
+# what changes no artifact: where results go, how they are shown, how fast they are computed
+NOT_IN_KEYS = ("run_dir", "progress", "nthread", "preset_name", "logger.", "eval.figures", "eval.videos")
+
+
+CONFIGS: dict = {}
+
+
+def config(recipe: str):
+    """The recipe's tiny config (a fresh copy)."""
+    if recipe not in CONFIGS:
+        with initialize_config_dir(config_dir=str(ROOT / "recipes" / recipe), version_base=None):
+            CONFIGS[recipe] = compose(config_name="config", overrides=["preset=tiny"])
+    return CONFIGS[recipe].copy()
+
+
+def plan_digests(recipe: str, cfg) -> dict[str, str]:
+    utils = importlib.import_module(f"recipes.{recipe}.utils")
+    robot = prepare(cfg, utils.checks)
+    return {stage.name: stage.digest for stage in utils.plan(cfg, robot)}
+
+
+def leaves(node, prefix=""):
+    for key, value in node.items():
+        if OmegaConf.is_dict(value):
+            yield from leaves(value, f"{prefix}{key}.")
+        else:
+            yield f"{prefix}{key}", value
+
+
+NO_OTHER_VALUE = {("lib", "planner.name"), ("sac", "settings")}  # LIB has one planner, SAC one setting
+SPECIAL = {"steps_per_action": 200, "policy.latent_dim": 3, "planner.name": "cem", "robot": "daisy",
+           "settings": ["legs_disabled"], "device": None, "planner.top_k": 20,
+           "sac.gamma": 0.9, "dynamics.holdout": 0.2}
+
+
+def changed_value(key: str, value):
+    """A valid different value for ``key``, or ``None`` when there is none to try here."""
+    if key in SPECIAL:
+        return SPECIAL[key]
+    if isinstance(value, bool):
+        return not value
+    if isinstance(value, int):
+        return value + 1
+    if isinstance(value, float):
+        return value * 1.5
+    if OmegaConf.is_list(value) and key.endswith("velocities"):
+        return [[0.5 * v for v in pair] for pair in OmegaConf.to_container(value)]
+    return None  # strings naming a task type, ...
+
+
+def changed_stages(recipe: str, key: str, value) -> set[str]:
+    other = config(recipe)
+    with open_dict(other):
+        OmegaConf.update(other, key, value, merge=False)
+    a, b = plan_digests(recipe, config(recipe)), plan_digests(recipe, other)
+    return {name for name in a.keys() | b.keys() if a.get(name) != b.get(name)}
+
+
+@pytest.mark.parametrize("recipe", RECIPES)
+def test_every_config_value_is_in_a_key_or_changes_nothing(recipe):
+    checked = 0
+    for key, value in leaves(config(recipe)):
+        new = changed_value(key, value)
+        if new is None or (recipe, key) in NO_OTHER_VALUE:
+            continue
+        changed = changed_stages(recipe, key, new)
+        if key.startswith(NOT_IN_KEYS):
+            assert not changed, f"{recipe}: {key} changes no artifact but changed the keys of {sorted(changed)}"
+        else:
+            assert changed, f"{recipe}: changing {key} ({value!r} -> {new!r}) changed no stage's key"
+        checked += 1
+    assert checked >= 20
+
+
+def test_the_right_stages_change():
+    evaluations = {f"evaluation_normal_{t}" for t in ("velocity_tracking", "goal_reaching", "trajectory_tracking",
+                                                        "goal_reaching_1p5m", "goal_reaching_3m",
+                                                        "velocity_tracking_diagonal")}
+    everything = {"experts", "gait_policy", "gait_policy_check", "dynamics_data_normal", "dynamics_model_normal",
+                  *evaluations}
+    assert changed_stages("lat", "seed", 1) == everything
+    assert changed_stages("lat", "policy.epochs", 21) == everything - {"experts"}
+    assert changed_stages("lat", "dynamics.lr", 2e-3) == {"dynamics_model_normal", *evaluations}
+    assert changed_stages("lat", "dynamics.num_robots", 21) == {"dynamics_data_normal", "dynamics_model_normal",
+                                                                 *evaluations}
+    assert changed_stages("lat", "planner.num_candidates", 600) == evaluations
+    assert changed_stages("lat", "eval.tasks.goal_reaching.num_steps", 4) == {"evaluation_normal_goal_reaching"}
+    # the IK key once omitted the seed: a seed-1 run reused a seed-0 run's every stage
+    ik = {"dynamics_data_normal", "dynamics_model_normal", *evaluations}
+    assert changed_stages("ik", "seed", 1) == ik
+    assert changed_stages("ik", "steps_per_action", 200) == ik
+    assert changed_stages("lib", "experts.num_experts", 5) == {"experts", *ik}
+    sac = changed_stages("sac", "sac.lr", 1e-3)
+    assert sac == {f"sac_{t}" for t in ("velocity_tracking", "goal_reaching", "trajectory_tracking")} | evaluations
+
+
+def test_the_robot_s_fingerprint_is_in_every_key():
+    """A user robot edited under the same name, or registered under a built-in's name, is another robot."""
+    from hierloco.envs.robots import get_robot, robot_fingerprint
+
+    a1 = get_robot("a1")
+    softer = a1.replace(kp=tuple(0.5 * k for k in (a1.kp or [100.0] * a1.num_joints)))
+    assert softer.name == "a1" and robot_fingerprint(softer) != robot_fingerprint(a1)
+    assert robot_fingerprint(a1.replace(gait_period=0.25)) != robot_fingerprint(a1)
