@@ -109,3 +109,37 @@ def headline(evaluations: dict) -> float:
     costs = [e.metrics["normalized_cost"] for (setting, _), e in evaluations.items()
              if setting == next(iter(evaluations))[0]]
     return float(np.mean(costs)) if costs else float("nan")
+
+
+def write_study_tables(rows: list[dict], results, out: Path, *, name: str, settings, title: str,
+                       tasks=("velocity_tracking", "goal_reaching", "trajectory_tracking")) -> str:
+    """A study's outputs in ``out``: ``<name>.csv`` (per-episode rows), ``<name>.md`` (mean +- std over targets and
+    seeds), ``wallclock.md`` (each job's wall-clock) and a bar chart per setting; returns the Markdown table."""
+    from hierloco.io import write_text
+    from hierloco.plots import plot_comparison
+    from hierloco.results import EPISODE_COLUMNS, csv_text, markdown_table
+
+    table = markdown_table(rows)
+    columns = EPISODE_COLUMNS + [k for k in rows[0] if k not in EPISODE_COLUMNS]
+    write_text(out / f"{name}.csv", csv_text(rows, columns))
+    write_text(out / f"{name}.md", f"# {name.capitalize()}\n\n{title}. Normalised cost, mean +- std over targets and "
+                                   "seeds (1 = no better than standing still).\n\n" + table)
+    lines = ["| method | run directory | wall-clock (min) | reused |", "|---|---|---|---|"]
+    for result in results:
+        seconds = result.seconds if not result.reused else _recorded_seconds(result.job.run_dir)
+        lines.append(f"| {result.job.method} | {result.job.run_dir} | {seconds / 60:.1f} | "
+                     f"{'yes' if result.reused else 'no'} |")
+    write_text(out / "wallclock.md", "# Wall-clock per job\n\n" + "\n".join(lines) + "\n")
+    for setting in settings:
+        if any(r["setting"] == setting and r["task"] in tasks for r in rows):
+            plot_comparison(rows, out / f"{name}_{setting}.png", setting=setting, tasks=tasks, title=title)
+    return table
+
+
+def _recorded_seconds(run_dir: str) -> float:
+    import json
+
+    try:
+        return float(json.loads((Path(run_dir) / "job.json").read_text())["seconds"])
+    except (OSError, ValueError, KeyError):
+        return float("nan")

@@ -1,63 +1,85 @@
-"""Compare methods: run every method's recipe on every robot and seed, then tabulate and plot (SPEC 8).
+"""Compare methods (Li et al., RA-L 2021, Sec. IV-B and IV-C): every method's recipe on every robot and seed, as
+jobs on Ray, then the comparison table and bar charts.
 
-    python recipes/compare/run.py                           # LAT, LIB, IK on A1 and Daisy, paper scale
-    python recipes/compare/run.py robots=[a1] seeds=[0,1,2] preset=small
+    python recipes/compare/run.py                           # LAT, LIB, IK, SAC on A1 and Daisy, paper scale
+    python recipes/compare/run.py robots=[a1] seeds=[0,1,2] preset=small ray.cores_per_job=2
+    RAY_ADDRESS=ray://head:10001 python recipes/compare/run.py seeds=[0,1,2]
 
 Each method runs as its own recipe in its own run directory (``outputs/<method>/<preset>/<robot>_seed<seed>``), so
-finished runs are reused. Writes ``comparison.csv``, ``comparison.md`` and ``comparison_<setting>.png`` in
-``out_dir``.
+finished runs are reused. Writes ``comparison.csv``, ``comparison.md``, ``wallclock.md`` and
+``comparison_<setting>.png`` in ``out_dir``.
 """
 
-from __future__ import annotations
+import hierloco  # noqa: F401  (first: headless MuJoCo rendering is set before anything loads MuJoCo)
 
+import sys
 from pathlib import Path
 
-import hydra
-from omegaconf import DictConfig
-
-from recipes.common import studies  # noqa: E402
-from hierloco.envs.robots import ROBOTS  # noqa: E402
-from hierloco.io import write_text  # noqa: E402
-from hierloco.plots import plot_comparison  # noqa: E402
-from hierloco.results import EPISODE_COLUMNS, csv_text, markdown_table  # noqa: E402
+from recipes.common import studies
+from recipes.common.config import ConfigError, as_lists
+from recipes.common.entry import recipe_main
+from recipes.common.report import write_study_tables
 
 
-def validate(cfg: DictConfig) -> None:
+def check(cfg) -> list:
+    """The robots (resolved: names or YAML paths); raises one ConfigError naming every problem."""
+    from hierloco.envs.robots import get_robot
+
+    as_lists(cfg, ("methods", "robots", "seeds", "settings", "adverse_methods", "overrides"))
     problems = [f"unknown method {m!r} (recipes: {', '.join(studies.METHODS)})" for m in cfg.methods
                 if m not in studies.METHODS]
-    problems += [f"unknown robot {r!r} (registered: {sorted(ROBOTS)})" for r in cfg.robots if r not in ROBOTS]
-    problems += [f"unknown setting {s!r}" for s in cfg.settings if s not in ("normal", "legs_disabled")]
+    robots = []
+    for robot in cfg.robots:
+        try:
+            robots.append(get_robot(robot))
+        except (ValueError, OSError) as error:
+            problems.append(str(error))
+    problems += [f"unknown setting {s!r} (normal, legs_disabled)" for s in cfg.settings
+                 if s not in ("normal", "legs_disabled")]
+    problems += [f"seed {s!r} is not an integer >= 0" for s in cfg.seeds if not (isinstance(s, int) and s >= 0)]
     if not cfg.seeds:
         problems.append("seeds is empty")
+    if not (isinstance(cfg.ray.cores_per_job, int) and cfg.ray.cores_per_job >= 1):
+        problems.append(f"ray.cores_per_job must be an integer >= 1, got {cfg.ray.cores_per_job!r}")
     if problems:
-        raise ValueError("bad config:\n  " + "\n  ".join(problems))
+        raise ConfigError("bad config: " + "; ".join(problems))
+    return robots
 
 
-def run_method(cfg, method: str, robot: str, seed: int) -> list[dict]:
-    settings = [s for s in cfg.settings if s == "normal" or method in cfg.adverse_methods]
-    run_dir = Path("outputs") / method / cfg.preset / f"{robot}_seed{seed}"
-    return studies.run_recipe(method, run_dir, [f"preset={cfg.preset}", f"robot={robot}", f"seed={seed}",
-                                                f"settings=[{','.join(settings)}]", *cfg.overrides])
+def robot_override(robot: str) -> str:
+    """A robot YAML path as an absolute path, so that every worker finds it."""
+    return str(Path(robot).resolve()) if str(robot).endswith((".yaml", ".yml")) else str(robot)
 
 
-@hydra.main(config_path=".", config_name="config", version_base=None)
-def main(cfg: DictConfig) -> None:
-    validate(cfg)
-    rows = []
-    for robot in cfg.robots:
+def jobs(cfg, robots) -> list:
+    planned = []
+    for robot, spec in zip(cfg.robots, robots):
         for method in cfg.methods:
+            settings = [s for s in cfg.settings if s == "normal" or method in cfg.adverse_methods]
+            if not settings:
+                continue
             for seed in cfg.seeds:
-                rows += run_method(cfg, method, robot, seed)
-    out = Path(cfg.out_dir)
-    table = markdown_table(rows)
-    write_text(out / "comparison.csv", csv_text(rows, EPISODE_COLUMNS))
-    write_text(out / "comparison.md", "# Comparison\n\nNormalised cost, mean +- std over targets and seeds.\n\n" + table)
-    for setting in cfg.settings:
-        if any(r["setting"] == setting for r in rows):
-            plot_comparison(rows, out / f"comparison_{setting}.png", setting=setting,
-                            title=f"Normalised cost ({cfg.preset} preset, {len(cfg.seeds)} seed(s))")
-    print("\n" + table)
-    print(f"comparison table and figures in {out}/")
+                run_dir = Path("outputs") / method / cfg.preset_name / f"{spec.name}_seed{seed}"
+                overrides = [f"preset={cfg.preset_name}", f"robot={robot_override(robot)}", f"seed={seed}",
+                             f"settings=[{','.join(settings)}]", "progress=false", *cfg.overrides,
+                             *cfg.method_overrides.get(method, [])]
+                planned.append(studies.Job(method, str(run_dir), overrides))
+    return planned
+
+
+@recipe_main(__file__)
+def main(cfg) -> None:
+    robots = check(cfg)
+    results = studies.run_jobs(jobs(cfg, robots), address=cfg.ray.address, cores_per_job=cfg.ray.cores_per_job,
+                               fetch_run_dirs=cfg.ray.fetch_run_dirs)
+    rows = studies.rows_of(results)
+    if rows:
+        table = write_study_tables(rows, results, Path(cfg.out_dir), name="comparison", settings=cfg.settings,
+                                   title=f"Normalised cost ({cfg.preset_name} preset, {len(cfg.seeds)} seed(s))")
+        print("\n" + table)
+        print(f"comparison table and figures in {cfg.out_dir}/")
+    if studies.report_failures(results):
+        sys.exit(1)
 
 
 if __name__ == "__main__":
