@@ -24,7 +24,8 @@ target the start heading); the planner keeps the candidate of lowest cost. ``sco
 trajectory tracking (target: the reference point of each step). For LIB runs the action is the model's one-hot
 expert vector (``A = G``), for IK the velocity command; runs without a gait policy (LIB, IK) export only the model.
 ``manifest.json`` (written last) describes every file: inputs and outputs with shapes and units, the latent box,
-the expert latents, the robot's joint order, and the measured agreement with PyTorch.
+the expert latents, the robot's joint order, and the measured agreement with PyTorch. From a shell:
+``python -m hierloco.export RUN_DIR OUT_DIR [--setting legs_disabled]``.
 
 Example:
     >>> import tempfile, numpy as np, onnxruntime
@@ -443,3 +444,31 @@ def _versions(*packages: str) -> dict[str, str | None]:
 
 
 __all__ = ["CoMPlannerStep", "CoMPredict", "GaitPolicyPattern", "GaitPolicyStep", "TaskScoring", "export_run"]
+
+
+def main(argv=None) -> int:
+    """``python -m hierloco.export RUN_DIR OUT_DIR [--setting legs_disabled] [--horizon H]``; exit 1 on bad input."""
+    import argparse
+    import sys
+
+    parser = argparse.ArgumentParser(prog="python -m hierloco.export", description="Exports a trained run for "
+                                     "deployment: ONNX and TorchScript files and a manifest.json.")
+    parser.add_argument("run_dir")
+    parser.add_argument("out_dir")
+    parser.add_argument("--setting", default="normal", help="normal or legs_disabled: which dynamics model")
+    parser.add_argument("--horizon", type=int, default=None, help="H of the exported scoring (default: the run's)")
+    args = parser.parse_args(argv)
+    try:
+        manifest = export_run(args.run_dir, args.out_dir, setting=args.setting, horizon=args.horizon)
+    except ValueError as error:
+        print(f"hierloco.export: {error}", file=sys.stderr)
+        return 1
+    for stem, entry in manifest["models"].items():
+        print(f"{stem:26s} {entry['onnx']}, {entry['torchscript']}  (largest difference to PyTorch "
+              f"{max(entry['max_abs_error'].values()):.1e})")
+    print(f"manifest: {Path(args.out_dir) / 'manifest.json'}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -306,9 +306,6 @@ class RunLogger:
     def active_backends(self) -> tuple[str, ...]:
         return tuple(self.loggers)
 
-    def _others(self):
-        return [logger for backend, logger in self.loggers.items() if backend != "csv"]
-
     # ------------------------------------------------------------------------------------------------ scalars
     def log_scalar(self, name: str, value: float, step: int = 0) -> None:
         """``value`` of metric ``name`` (cleaned by :func:`metric_name`) at ``step`` (an epoch, a frame count)."""
@@ -383,7 +380,8 @@ class RunLogger:
             self.loggers["tensorboard"].experiment.add_image(name, pixels, global_step=step, dataformats="HWC")
 
     def log_video(self, name: str, frames, fps: int = 20, step: int = 0) -> None:
-        """``T x H x W x 3`` uint8 frames to the loggers that take videos (wandb, TensorBoard); CSV keeps none."""
+        """``T x H x W x 3`` uint8 frames to wandb; CSV keeps none, TensorBoard neither (torch's video writer needs
+        the moviepy 1 API, and the project uses moviepy 2 for its MP4 files)."""
         import torch
 
         name, step = metric_name(name), _check_step(step)
@@ -391,8 +389,8 @@ class RunLogger:
         if array.ndim != 4 or array.shape[-1] != 3 or array.dtype != np.uint8:
             raise ValueError(f"frames must be T x H x W x 3 uint8, got {array.dtype} {array.shape}")
         video = torch.as_tensor(np.ascontiguousarray(array.transpose(0, 3, 1, 2)))[None]
-        for logger in self._others():
-            logger.log_video(name, video, step=step, fps=fps)
+        if "wandb" in self.loggers:
+            self.loggers["wandb"].log_video(name, video, step=step, fps=fps)
 
     def log_table(self, name: str, rows: Sequence[Mapping[str, Any]], step: int = 0) -> Path:
         """Rows of a table (e.g. per-episode results): a wandb ``Table``, ``tables/<name>.csv`` in the experiment

@@ -260,3 +260,15 @@ def test_refuses_corrupted_and_mismatched_artifacts(lat_run, tmp_path):
     with pytest.raises(ArtifactError, match="3-D actions .* 2-D latents"):
         export_run(run_dir, tmp_path / "out")
     assert not (tmp_path / "out").exists()
+
+
+def test_command_line_refuses_with_one_line_and_exit_code(tmp_path):
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-m", "hierloco.export", str(tmp_path), str(tmp_path / "out")],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 1
+    assert done.stderr.strip() == f"hierloco.export: {tmp_path} holds nothing to export: neither gait_policy.pt " \
+                                  "nor dynamics_model_normal.pt"
+    assert not (tmp_path / "out").exists()

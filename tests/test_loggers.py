@@ -216,6 +216,9 @@ def test_wandb_offline_never_touches_the_network(tmp_path, wandb_home, monkeypat
     logger.log_image("figures/latent_map", png)
     logger.log_table("eval/episodes", [{"task": "goal_reaching", "cost": 0.25}])
     logger.summary({"eval/success_rate": 0.75})
+    logger.log_video("eval/normal/goal_reaching/video", np.zeros((6, 16, 16, 3), np.uint8), fps=20)
+    with pytest.raises(ValueError, match="T x H x W x 3 uint8"):
+        logger.log_video("eval/normal/goal_reaching/video", np.zeros((6, 16, 16), np.uint8))
     logger.close()
     assert connections() == 0
     assert "WANDB_MODE" not in os.environ  # TorchRL's process-wide switch does not leak into later loggers
@@ -227,6 +230,7 @@ def test_wandb_offline_never_touches_the_network(tmp_path, wandb_home, monkeypat
                  "eval/success_rate", "lat/a1/tiny", "tiny", logger.exp_name):
         assert text.encode() in record, text
     assert b"goal_reaching_1.5m" not in record
+    assert list(runs[0].glob("files/media/videos/eval/normal/goal_reaching/video_*.mp4"))
     assert (logger.experiment_dir / "scalars/eval/normal/goal_reaching_1p5m/normalized_cost.csv").exists()
 
 
