@@ -300,7 +300,8 @@ def export_run(run_dir: str | os.PathLike, out_dir: str | os.PathLike, *, settin
     low_level = _read_low_level(run_dir, setting) if trained_model is not None else None
     config = _read_run_config(run_dir)
     if horizon is None:
-        horizon = int((config.get("planner") or {}).get("horizon", 1))
+        planner = config.get("planner")
+        horizon = planner.get("horizon", 1) if isinstance(planner, dict) else 1
     if isinstance(horizon, bool) or not isinstance(horizon, int) or horizon < 1:
         raise ValueError(f"horizon must be a positive integer, got {horizon!r}")
     if trained_model is not None and low_level is None and trained_policy is not None:
@@ -351,19 +352,24 @@ def export_run(run_dir: str | os.PathLike, out_dir: str | os.PathLike, *, settin
                         expert_latents=trained_policy.latents.tolist(), steps_per_action=steps,
                         action_duration_s=steps * CONTROL_TIMESTEP, joint_names=joint_names)
         joint_units = "rad, position targets in " + ("joint_names order" if joint_names else "the robot's joint order")
-        latent = lambda name="latent", batch="B": {"name": name, "shape": [batch, z_dim], "dtype": "float32",  # noqa
-                                                   "units": "latent action z (unitless), inside latent_box"}
-        z = lambda b: _uniform(generator, (b, z_dim), low, high)  # noqa: E731
+        latent = {"name": "latent", "shape": ["B", z_dim], "dtype": "float32",
+                  "units": "latent action z (unitless), inside latent_box"}
+
+        def z(batch):
+            return _uniform(generator, (batch, z_dim), low, high)
+
+        def phase(batch):
+            return torch.randint(1, steps + 1, (batch, 1), generator=generator).float() / steps
+
         write("gait_policy_pattern", GaitPolicyPattern(policy),
               "pi(., z): all N joint targets of one latent action (step n at phase n / N), 100 Hz",
-              [latent()], [{"name": "joint_targets", "shape": ["B", steps, joints], "dtype": "float32",
-                            "units": joint_units}],
+              [latent], [{"name": "joint_targets", "shape": ["B", steps, joints], "dtype": "float32",
+                          "units": joint_units}],
               (z(3),), [(z(1),), (z(5),)])
-        phase = lambda b: torch.randint(1, steps + 1, (b, 1), generator=generator).float() / steps  # noqa: E731
         write("gait_policy_step", GaitPolicyStep(policy),
               "pi(t, z): the joint targets at phase t = n / N of the latent action z",
               [{"name": "phase", "shape": ["B", 1], "dtype": "float32",
-                "units": "t = n / N in (0, 1], n the control step within the action (1..N)"}, latent()],
+                "units": "t = n / N in (0, 1], n the control step within the action (1..N)"}, latent],
               [{"name": "joint_targets", "shape": ["B", joints], "dtype": "float32", "units": joint_units}],
               (phase(3), z(3)), [(phase(1), z(1)), (phase(6), z(6))])
 
@@ -384,18 +390,17 @@ def export_run(run_dir: str | os.PathLike, out_dir: str | os.PathLike, *, settin
                 return torch.nn.functional.one_hot(index, a_dim).float()
             return _uniform(generator, (*shape, a_dim), box_low, box_high)
 
-        state = lambda: {"name": "com_state", "shape": ["B", 5], "dtype": "float32",  # noqa: E731
-                         "units": COM_STATE_UNITS}
+        state = {"name": "com_state", "shape": ["B", 5], "dtype": "float32", "units": COM_STATE_UNITS}
         write("com_model_predict", CoMPredict(model),
               "the learned CoM dynamics over one action: world-frame state after the action",
-              [state(), {"name": "action", "shape": ["B", a_dim], "dtype": "float32", "units": action_units}],
+              [state, {"name": "action", "shape": ["B", a_dim], "dtype": "float32", "units": action_units}],
               [{"name": "next_com_state", "shape": ["B", 5], "dtype": "float32", "units": COM_STATE_UNITS}],
               (_random_states(generator, 3), actions(3)),
               [(_random_states(generator, 1), actions(1)), (_random_states(generator, 7), actions(7))])
         write("planner_model_step", CoMPlannerStep(model),
               "the model step of the planner: S candidate actions imagined from each of B states",
-              [state(), {"name": "candidates", "shape": ["B", "S", a_dim], "dtype": "float32",
-                         "units": action_units}],
+              [state, {"name": "candidates", "shape": ["B", "S", a_dim], "dtype": "float32",
+                       "units": action_units}],
               [{"name": "next_com_state", "shape": ["B", "S", 5], "dtype": "float32", "units": COM_STATE_UNITS}],
               (_random_states(generator, 2), actions(2, 7)),
               [(_random_states(generator, 1), actions(1, 1)), (_random_states(generator, 3), actions(3, 500))])
@@ -407,12 +412,14 @@ def export_run(run_dir: str | os.PathLike, out_dir: str | os.PathLike, *, settin
                                               "horizon (trajectory tracking: the reference point of each step)", 3.0),
                 ("score_velocity_tracking", velocity, "target CoM velocity (vx, vy) in m/s, world frame, for each "
                                                       "step of the horizon", 0.3)]:
-            target = lambda b: _uniform(generator, (b, horizon, 2), [-scale] * 2, [scale] * 2)  # noqa: E731
+            def target(batch, scale=scale):
+                return _uniform(generator, (batch, horizon, 2), [-scale] * 2, [scale] * 2)
+
             write(stem, TaskScoring(model, task),
                   f"the planner's {task.name} cost of candidate action sequences (summed over the horizon, lower is "
                   f"better): cost = {W_POSITION:g} |target - .| + {W_YAW:g} |yaw_target - yaw| per step",
-                  [state(), {"name": "candidates", "shape": ["B", "S", horizon, a_dim], "dtype": "float32",
-                             "units": action_units},
+                  [state, {"name": "candidates", "shape": ["B", "S", horizon, a_dim], "dtype": "float32",
+                           "units": action_units},
                    {"name": "target", "shape": ["B", horizon, 2], "dtype": "float32", "units": target_units}],
                   [{"name": "cost", "shape": ["B", "S"], "dtype": "float32", "units": "task cost (unitless)"}],
                   (_random_states(generator, 2), actions(2, 7, horizon), target(2)),
