@@ -85,9 +85,15 @@ class Task:
         ``step`` (0-based) of ``episode``; all arguments broadcast together."""
         state, next_state = _as_tensor(com_state), _as_tensor(next_com_state)
         episode, step = torch.broadcast_tensors(_as_tensor(episode).long(), _as_tensor(step).long())
-        target = self.target(episode, step).to(next_state.dtype)
-        yaw_error = wrap_angle(self.start_yaw - next_state[..., 2]).abs()
-        return W_POSITION * self._tracking_error(state, next_state, target) + W_YAW * yaw_error
+        return self.cost_to_target(state, next_state, self.target(episode, step).to(next_state.dtype))
+
+    def cost_to_target(self, com_state: torch.Tensor, next_com_state: torch.Tensor,
+                       target: torch.Tensor) -> torch.Tensor:
+        """Cost ``...`` of ``com_state -> next_com_state`` (``... x 5`` world tensors) against an explicit ``... x 2``
+        target of this task's kind (a velocity in m/s or a position in m, world frame): what :meth:`cost` computes
+        for the target of a task step, usable where the target is an input (e.g. an exported planner)."""
+        yaw_error = wrap_angle(self.start_yaw - next_com_state[..., 2]).abs()
+        return W_POSITION * self._tracking_error(com_state, next_com_state, target) + W_YAW * yaw_error
 
     def reward(self, tensordict: TensorDictBase, state_key="com_state", episode_key="task_episode",
                step_key="task_step") -> torch.Tensor:

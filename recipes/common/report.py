@@ -40,16 +40,11 @@ def task_evaluation(rollout, task, *, method: str, robot: str, setting: str, see
                                                      "robot": robot, "seed": int(seed)})
 
 
-def metric_name(name: str) -> str:
-    """A task name as a clean metric path component (``goal_reaching_1.5m`` -> ``goal_reaching_1p5m``)."""
-    return name.replace(".", "p").replace("/", "_")
-
-
 def log_evaluation(logger, evaluation: TaskEvaluation, setting: str, name: str) -> None:
-    prefix = f"eval/{setting}/{metric_name(name)}"
+    prefix = f"eval/{setting}/{name}"  # the logger cleans names (goal_reaching_1.5m -> goal_reaching_1p5m)
     logger.log_metrics({f"{prefix}/{key}": value for key, value in evaluation.metrics.items()
                         if key != "plan_seconds"})
-    logger.log_scalar(f"time/{setting}/{metric_name(name)}/plan_seconds", evaluation.metrics["plan_seconds"])
+    logger.log_scalar(f"time/{setting}/{name}/plan_seconds", evaluation.metrics["plan_seconds"])
 
 
 def task_figures(evaluation: TaskEvaluation, task, robot, figures: Path, *, method: str, setting: str,

@@ -19,7 +19,7 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 
 from hierloco.io import write_text
-from hierloco.loggers import RunLogger
+from hierloco.loggers import NullLogger, RunLogger, metric_component
 from hierloco.results import TaskEvaluation, write_results
 from hierloco.runs import RunDirectory
 from hierloco.trained import MANIFEST
@@ -77,7 +77,7 @@ class Run:
         self.plan = {stage.name: stage for stage in stages}
         self.dir = directory
         self.out = Path(EVALUATE["out"]) if EVALUATE else directory.path  # where tables, figures and videos go
-        self.logger = logger if logger is not None else RunLogger.null()
+        self.logger = logger if logger is not None else NullLogger()
         self.nthread = int(cfg.nthread) if cfg.get("nthread") is not None else default_threads()
         self.progress = bool(cfg.progress)
         self.reports: dict = {}
@@ -155,9 +155,10 @@ class Run:
         write_text(self.out / "config.yaml", OmegaConf.to_yaml(self.cfg, resolve=True))
         for stage, seconds in self.dir.timings.items():
             self.logger.log_scalar(f"time/{stage}", seconds)
-        self.logger.log_table("eval/results", rows)
+        if rows:
+            self.logger.log_table("eval/results", rows)
         self.logger.summary({"headline_normalized_cost": headline,
-                             **{f"eval/{s}/{report.metric_name(n)}/normalized_cost": e.metrics["normalized_cost"]
+                             **{f"eval/{s}/{metric_component(n)}/normalized_cost": e.metrics["normalized_cost"]
                                 for (s, n), e in self.evaluations.items()}})
         self.logger.close()
         print(f"\n{self.method.upper()} on {self.robot.name} (seed {self.cfg.seed}), run directory {self.path}"
@@ -185,7 +186,7 @@ class Run:
                 if frames is None:
                     print(f"no video of {setting}/{name}: its evaluation kept no joint positions")
                 else:
-                    self.logger.log_video(f"eval/{setting}/{report.metric_name(name)}/video", frames,
+                    self.logger.log_video(f"eval/{setting}/{metric_component(name)}/video", frames,
                                           fps=report.VIDEO_FPS)
         if low_level is not None and self.cfg.eval.figures:
             path = report.latent_map(low_level, self.robot, figures / "latent_map.png", method=self.method,
@@ -220,7 +221,7 @@ def open_run(cfg: DictConfig, method: str, plan: Callable, checks: Callable | No
         write_text(directory.path / MANIFEST, json.dumps(info, indent=2))
     if not directory.readonly:
         preset = cfg.get("preset_name", "custom")
-        logger = RunLogger(f"{method}_{robot.name}", directory.path / "logs", backends=cfg.logger.backends,
+        logger = RunLogger(robot.name, directory.path / "logs", prefix=method, backends=cfg.logger.backends,
                            project=cfg.logger.project, wandb_mode=cfg.logger.wandb_mode,
                            group=f"{method}/{robot.name}/{preset}", tags=[method, robot.name, str(preset)],
                            config=OmegaConf.to_container(cfg, resolve=True))
