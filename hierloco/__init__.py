@@ -21,4 +21,12 @@ def load_run(run_dir):
     return _load_run(run_dir)
 
 
-__all__ = ["__version__", "load_run"]
+def export(run_dir, out_dir, **options):
+    """Writes a trained run's gait policy, CoM model and planner scoring as ONNX and TorchScript for deployment:
+    see :func:`hierloco.exporting.export_run`."""
+    from hierloco.exporting import export_run
+
+    return export_run(run_dir, out_dir, **options)
+
+
+__all__ = ["__version__", "export", "load_run"]

@@ -19,7 +19,7 @@ from hierloco.envs.latent_env import LatentActionEnv
 from hierloco.envs.robots import CONTROL_TIMESTEP, get_robot
 from hierloco.envs.tasks import GoalReaching, TrajectoryTracking, VelocityTracking
 from hierloco.envs.world_model import CoMWorldModelEnv
-from hierloco.export import TOLERANCE, export_run
+from hierloco.exporting import TOLERANCE, export_run
 from hierloco.io import ArtifactError
 
 onnxruntime = pytest.importorskip("onnxruntime")
@@ -266,9 +266,9 @@ def test_command_line_refuses_with_one_line_and_exit_code(tmp_path):
     import subprocess
     import sys
 
-    done = subprocess.run([sys.executable, "-m", "hierloco.export", str(tmp_path), str(tmp_path / "out")],
+    done = subprocess.run([sys.executable, "-m", "hierloco.exporting", str(tmp_path), str(tmp_path / "out")],
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 1
-    assert done.stderr.strip() == f"hierloco.export: {tmp_path} holds nothing to export: neither gait_policy.pt " \
+    assert done.stderr.strip() == f"hierloco.exporting: {tmp_path} holds nothing to export: neither gait_policy.pt " \
                                   "nor dynamics_model_normal.pt"
     assert not (tmp_path / "out").exists()

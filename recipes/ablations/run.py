@@ -1,65 +1,83 @@
-"""LAT ablations: vary one setting at a time (latent dimension, number of experts, dynamics samples) over several
-trials, then tabulate and plot (SPEC 8, the paper's ablation figure).
+"""LAT ablations (Li et al., RA-L 2021, Sec. IV-D): vary one setting at a time (latent dimension, number of experts,
+dynamics samples) over several trials, as jobs on Ray, then tabulate and plot.
 
     python recipes/ablations/run.py                    # Daisy, paper scale, 10 trials per value
     python recipes/ablations/run.py trials=3 preset=small robot=a1 run=[latent_dim]
 
 Every trial is a LAT run in ``out_dir/<ablation>_<value>/seed<trial>`` (finished runs are reused). Writes
-``ablations.csv``, ``ablations.md`` and ``ablations.png`` in ``out_dir``.
+``ablations.csv``, ``ablations.md``, ``wallclock.md`` and ``ablations.png`` in ``out_dir``.
 """
 
-from __future__ import annotations
+import hierloco  # noqa: F401  (first: headless MuJoCo rendering is set before anything loads MuJoCo)
 
+import sys
 from pathlib import Path
 
-import hydra
-from omegaconf import DictConfig
-
-from recipes.common import studies  # noqa: E402
-from hierloco.envs.robots import ROBOTS  # noqa: E402
-from hierloco.io import write_text  # noqa: E402
-from hierloco.plots import plot_ablations  # noqa: E402
-from hierloco.results import EPISODE_COLUMNS, csv_text, markdown_table  # noqa: E402
+from hierloco.io import write_text
+from hierloco.plots import plot_ablations
+from hierloco.results import EPISODE_COLUMNS, csv_text, markdown_table
+from recipes.common import studies
+from recipes.common.config import ConfigError, as_lists
+from recipes.common.entry import recipe_main
 
 
-def validate(cfg: DictConfig) -> None:
-    problems = [] if cfg.robot in ROBOTS else [f"unknown robot {cfg.robot!r} (registered: {sorted(ROBOTS)})"]
+def check(cfg) -> None:
+    from hierloco.envs.robots import get_robot
+
+    as_lists(cfg, ("run", "overrides"))
+    problems = []
+    try:
+        get_robot(cfg.robot)
+    except (ValueError, OSError) as error:
+        problems.append(str(error))
     if not (isinstance(cfg.trials, int) and cfg.trials >= 1):
-        problems.append(f"trials must be a positive integer, got {cfg.trials!r}")
+        problems.append(f"trials must be an integer >= 1, got {cfg.trials!r}")
     for name, spec in cfg.ablations.items():
         if "key" not in spec or not spec.get("values"):
             problems.append(f"ablation {name!r} needs a key and a list of values")
-    problems += [f"unknown ablation {name!r} in run (ablations: {sorted(cfg.ablations)})" for name in cfg.run
+    problems += [f"unknown ablation {name!r} in run (ablations: {', '.join(cfg.ablations)})" for name in cfg.run
                  if name not in cfg.ablations]
     if problems:
-        raise ValueError("bad config:\n  " + "\n  ".join(problems))
+        raise ConfigError("bad config: " + "; ".join(problems))
 
 
-@hydra.main(config_path=".", config_name="config", version_base=None)
-def main(cfg: DictConfig) -> None:
-    validate(cfg)
-    out = Path(cfg.out_dir)
-    results, rows = {}, []
+def jobs(cfg) -> list:
+    robot = str(Path(cfg.robot).resolve()) if str(cfg.robot).endswith((".yaml", ".yml")) else cfg.robot
+    planned = []
     for name in cfg.run:
         spec = cfg.ablations[name]
-        results[name] = {}
         for value in spec["values"]:
-            trial_rows = []
             for trial in range(cfg.trials):
-                run_dir = out / f"{name}_{value}" / f"seed{trial}"
-                overrides = [f"preset={cfg.preset}", f"robot={cfg.robot}", f"seed={trial}", f"{spec['key']}={value}",
-                             *cfg.overrides]
-                for row in studies.run_recipe("lat", run_dir, overrides):
-                    trial_rows.append({**row, "method": f"{name}={value}"})
-            results[name][value] = trial_rows
-            rows += trial_rows
-    table = markdown_table(rows)
-    write_text(out / "ablations.csv", csv_text(rows, EPISODE_COLUMNS))
-    write_text(out / "ablations.md", f"# LAT ablations on {cfg.robot} ({cfg.preset} preset, {cfg.trials} trials per "
-                                     "value)\n\nNormalised cost, mean +- std over targets and trials.\n\n" + table)
-    plot_ablations(results, out / "ablations.png", title=f"LAT ablations on {cfg.robot} ({cfg.trials} trials)")
-    print("\n" + table)
-    print(f"ablation table and figure in {out}/")
+                run_dir = Path(cfg.out_dir) / f"{name}_{value}" / f"seed{trial}"
+                overrides = [f"preset={cfg.preset_name}", f"robot={robot}", f"seed={trial}", f"{spec['key']}={value}",
+                             "progress=false", *cfg.overrides]
+                planned.append(studies.Job("lat", str(run_dir), overrides,
+                                           labels={"method": f"{name}={value}", "ablation": name, "value": value}))
+    return planned
+
+
+@recipe_main(__file__)
+def main(cfg) -> None:
+    check(cfg)
+    planned = jobs(cfg)
+    results = studies.run_jobs(planned, address=cfg.ray.address, cores_per_job=cfg.ray.cores_per_job,
+                               fetch_run_dirs=cfg.ray.fetch_run_dirs)
+    rows = studies.rows_of(results)
+    out = Path(cfg.out_dir)
+    if rows:
+        per_value: dict = {}
+        for row in rows:
+            per_value.setdefault(row["ablation"], {}).setdefault(row["value"], []).append(row)
+        table = markdown_table(rows)
+        write_text(out / "ablations.csv", csv_text(rows, EPISODE_COLUMNS))
+        write_text(out / "ablations.md", f"# LAT ablations on {cfg.robot} ({cfg.preset_name} preset, {cfg.trials} "
+                                         "trials per value)\n\nNormalised cost, mean +- std over targets and trials."
+                                         "\n\n" + table)
+        plot_ablations(per_value, out / "ablations.png", title=f"LAT ablations on {cfg.robot} ({cfg.trials} trials)")
+        print("\n" + table)
+        print(f"ablation table and figure in {out}/")
+    if studies.report_failures(results):
+        sys.exit(1)
 
 
 if __name__ == "__main__":

@@ -13,11 +13,12 @@ import hierloco  # noqa: F401  (first: headless MuJoCo rendering is set before a
 import json
 from pathlib import Path
 
-import hydra
 import numpy as np
 from omegaconf import DictConfig
 
 from recipes.common import studies  # noqa: E402
+from recipes.common.config import ConfigError  # noqa: E402
+from recipes.common.entry import recipe_main  # noqa: E402
 from hierloco.components.evaluation import run_task  # noqa: E402
 from hierloco.envs.latent_env import LatentActionEnv  # noqa: E402
 from hierloco.envs.navigation import clearance, cluttered_arena, plan_path  # noqa: E402
@@ -34,17 +35,17 @@ def validate(cfg: DictConfig) -> None:
     if not (cfg.inflation >= 0 and cfg.speed > 0 and cfg.arena.num_obstacles >= 0):
         problems.append("need inflation >= 0 m, speed > 0 m/s and arena.num_obstacles >= 0")
     if problems:
-        raise ValueError("bad config:\n  " + "\n  ".join(problems))
+        raise ConfigError("bad config: " + "; ".join(problems))
 
 
-@hydra.main(config_path=".", config_name="config", version_base=None)
+@recipe_main(__file__)
 def main(cfg: DictConfig) -> None:
     validate(cfg)
     arena = cluttered_arena(seed=cfg.arena.seed, num_obstacles=cfg.arena.num_obstacles, goal=tuple(cfg.arena.goal))
     path = plan_path(arena, inflation=cfg.inflation)  # before any training: an impossible arena fails fast
     lat_dir = Path(cfg.lat_run_dir)
-    studies.run_recipe("lat", lat_dir, [f"preset={cfg.lat_preset}", f"robot={cfg.robot}", f"seed={cfg.seed}",
-                                        f"progress={str(cfg.progress).lower()}"])
+    studies.run_here(studies.Job("lat", str(lat_dir), [f"preset={cfg.lat_preset}", f"robot={cfg.robot}",
+                                                       f"seed={cfg.seed}", f"progress={str(cfg.progress).lower()}"]))
     trained = load_run(lat_dir)  # the gait policy, the CoM model and the planner of the LAT run
     low_level = trained.low_level()
     planner = trained.planner(name="random_shooting", horizon=cfg.planner.horizon,

@@ -25,7 +25,7 @@ trajectory tracking (target: the reference point of each step). For LIB runs the
 expert vector (``A = G``), for IK the velocity command; runs without a gait policy (LIB, IK) export only the model.
 ``manifest.json`` (written last) describes every file: inputs and outputs with shapes and units, the latent box,
 the expert latents, the robot's joint order, and the measured agreement with PyTorch. From a shell:
-``python -m hierloco.export RUN_DIR OUT_DIR [--setting legs_disabled]``.
+``python -m hierloco.exporting RUN_DIR OUT_DIR [--setting legs_disabled]``.
 
 Example:
     >>> import tempfile, numpy as np, onnxruntime
@@ -454,11 +454,11 @@ __all__ = ["CoMPlannerStep", "CoMPredict", "GaitPolicyPattern", "GaitPolicyStep"
 
 
 def main(argv=None) -> int:
-    """``python -m hierloco.export RUN_DIR OUT_DIR [--setting legs_disabled] [--horizon H]``; exit 1 on bad input."""
+    """``python -m hierloco.exporting RUN_DIR OUT_DIR [--setting legs_disabled] [--horizon H]``; exit 1 on bad input."""
     import argparse
     import sys
 
-    parser = argparse.ArgumentParser(prog="python -m hierloco.export", description="Exports a trained run for "
+    parser = argparse.ArgumentParser(prog="python -m hierloco.exporting", description="Exports a trained run for "
                                      "deployment: ONNX and TorchScript files and a manifest.json.")
     parser.add_argument("run_dir")
     parser.add_argument("out_dir")
@@ -468,7 +468,7 @@ def main(argv=None) -> int:
     try:
         manifest = export_run(args.run_dir, args.out_dir, setting=args.setting, horizon=args.horizon)
     except ValueError as error:
-        print(f"hierloco.export: {error}", file=sys.stderr)
+        print(f"hierloco.exporting: {error}", file=sys.stderr)
         return 1
     for stem, entry in manifest["models"].items():
         print(f"{stem:26s} {entry['onnx']}, {entry['torchscript']}  (largest difference to PyTorch "
