@@ -172,11 +172,11 @@ def test_user_robot_errors_name_the_problem():
     feet = {leg: f"{leg}_toe" for leg in legs}
     with pytest.raises(ValueError, match="'nowhere'.*neither a site nor a body"):
         robot_from_mjcf(TOY_QUADRUPED_XML, feet={**feet, "RL": "nowhere"}, kp=[40.0] * 12, **common)
-    with pytest.raises(ValueError, match="no position servo; give RobotSpec.kp"):
+    with pytest.raises(ValueError, match="no position servo; give kp"):
         compile_model(robot_from_mjcf(TOY_QUADRUPED_XML, feet=feet, **common))  # torque motors and no kp
-    with pytest.raises(ValueError, match="kp has 3 values for 12 joints"):
-        robot_from_mjcf(TOY_QUADRUPED_XML, feet=feet, kp=[40.0] * 3, **common)
-    with pytest.raises(ValueError, match="standing_pose has 3 angles for 12 joints"):
-        robot_from_mjcf(TOY_QUADRUPED_XML, feet=feet, kp=[40.0] * 12, **{**common, "standing_pose": [0.0] * 3})
+    with pytest.raises(ValueError, match="kp has 5 values for 12 joints"):
+        robot_from_mjcf(TOY_QUADRUPED_XML, feet=feet, kp=[40.0] * 5, **common)
+    with pytest.raises(ValueError, match="standing_pose has 4 values for 12 joints"):
+        robot_from_mjcf(TOY_QUADRUPED_XML, feet=feet, kp=[40.0] * 12, **{**common, "standing_pose": [0.0] * 4})
     with pytest.raises(FileNotFoundError, match="no such file"):
         robot_from_mjcf("/nonexistent/robot.xml", feet=feet, **common)
