@@ -22,7 +22,14 @@ from typing import Mapping, Sequence
 
 import mujoco
 
-from hierloco.envs.robots.spec import PYTHON_SOURCE, Leg, RobotSpec, is_number, missing_name_message
+from hierloco.envs.robots.spec import (
+    PYTHON_SOURCE,
+    Leg,
+    RobotSpec,
+    check_leg_count,
+    is_number,
+    missing_name_message,
+)
 
 MJCF_SOURCE_PREFIX = "mjcf:"
 
@@ -135,6 +142,7 @@ def robot_from_mjcf(
     joints = {j.name: j for j in probe.joints}
     if base_body not in body_names:
         raise ValueError(f"{where}: base_body: {missing_name_message('body', base_body, body_names)}")
+    check_leg_count(where, list(legs))
     if set(feet) != set(legs):
         raise ValueError(f"{where}: feet {sorted(feet)} must name exactly the legs {sorted(legs)}")
     for leg, leg_joints in legs.items():

@@ -64,15 +64,27 @@ MODIFIED_MARK = " (modified: "
 
 
 def missing_name_message(kind: str, name: str, candidates: Iterable[str]) -> str:
-    """``"no joint named 'FR_hipp' (close: 'FR_hip')"``: a name that is not in the model, with the close ones."""
+    """``"no joint named 'FR_hipp' (close: 'FR_hip')"``: a name that is not there, with the close ones (ignoring
+    case), or the names there are."""
     candidates = sorted({c for c in candidates if c})
-    close = difflib.get_close_matches(str(name), candidates, n=4, cutoff=0.5)
+    lowered = {}
+    for candidate in candidates:
+        lowered.setdefault(candidate.lower(), candidate)
+    close = [lowered[c] for c in difflib.get_close_matches(str(name).lower(), list(lowered), n=4, cutoff=0.5)]
     if close:
         hint = "close: " + ", ".join(repr(c) for c in close)
+    elif candidates:
+        hint = f"{kind}s: " + ", ".join(repr(c) for c in candidates[:12]) + (", ..." if len(candidates) > 12 else "")
     else:
-        shown = ", ".join(repr(c) for c in candidates[:12]) + (", ..." if len(candidates) > 12 else "")
-        hint = f"the model has {shown}" if candidates else f"the model has no {kind}s"
+        hint = f"there are no {kind}s"
     return f"no {kind} named {name!r} ({hint})"
+
+
+def check_leg_count(where: str, legs: Sequence[str]) -> None:
+    """Refuses fewer than ``MIN_LEGS`` legs, saying why."""
+    if len(legs) < MIN_LEGS:
+        raise ValueError(f"{where}: legs: has {len(legs)} legs {list(legs)}; hierloco's expert gaits (Raibert "
+                         f"footsteps alternating between gait groups) need at least {MIN_LEGS} legs")
 
 
 def is_number(value) -> bool:
@@ -214,9 +226,7 @@ class RobotSpec:
 
     def _check_legs(self, where: str) -> None:
         names = [leg.name for leg in self.legs]
-        if len(names) < MIN_LEGS:
-            raise ValueError(f"{where}: legs: has {len(names)} legs {names}; hierloco's expert gaits (Raibert footsteps "
-                             f"alternating between gait groups) need at least {MIN_LEGS} legs")
+        check_leg_count(where, names)
         if len(set(names)) != len(names):
             raise ValueError(f"{where}: two legs share a name: {names}")
         for leg in self.legs:
