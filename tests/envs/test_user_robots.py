@@ -7,6 +7,7 @@ exactly that size, a contact margin), and its YAML description.
 
 from __future__ import annotations
 
+import inspect
 import json
 import math
 import os
@@ -39,6 +40,7 @@ from hierloco.envs.robots import (
     standing_qpos,
 )
 from hierloco.envs.locomotion import FOOT_CONTACT_FORCE
+from hierloco.envs.robots.yaml_robot import KEY_TYPES, REQUIRED_KEYS
 from tests.envs.toy_robot import make_toy_robot
 
 REPO = Path(__file__).resolve().parents[2]
@@ -146,6 +148,12 @@ def test_yaml_errors_name_the_file_and_the_key(tmp_path, changes, message):
     with pytest.raises(ValueError, match=message) as error:
         get_robot(str(path))
     assert str(error.value).startswith(str(path)), error.value
+
+
+def test_yaml_keys_are_robot_from_mjcf_keyword_arguments():
+    parameters = inspect.signature(robot_from_mjcf).parameters
+    assert set(KEY_TYPES) == {"mjcf"} | set(parameters) - {"xml", "source"}
+    assert set(REQUIRED_KEYS) == {"mjcf", "name", "base_body", "legs", "feet", "standing_pose", "gait_groups"}
 
 
 def test_missing_or_malformed_yaml_file_is_a_clear_error(tmp_path):
