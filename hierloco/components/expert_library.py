@@ -6,6 +6,11 @@ action's worth of joint targets, starting on a gait-cycle boundary, with the CoM
 is frozen one gait period before recording, so each expert is an exactly periodic open-loop pattern. An expert that
 falls or blows up is replaced by a fresh command; no failed gait enters the library.
 
+Each expert's tracking (achieved minus commanded velocity and yaw rate, over the recorded action) is kept in the
+library. :func:`diagnose_expert_library` says whether the experts can represent the command box the latent space
+must span, and :func:`require_expert_library_quality` stops a run with an :class:`ExpertQualityError` when they
+cannot (say a robot that walks backward whatever it is commanded): how far off, in which direction, what to try.
+
 Example:
     >>> lib = build_expert_library("daisy", num_experts=4, seed=0, progress=False)
     >>> lib.joint_targets.shape  # G x N x J
@@ -14,7 +19,9 @@ Example:
 
 from __future__ import annotations
 
+import math
 import os
+import warnings
 from dataclasses import asdict, dataclass, field
 from typing import Any, Sequence
 
@@ -24,7 +31,15 @@ from tqdm.auto import tqdm
 from hierloco.components.experts import RaibertController, run_closed_loop
 from hierloco.envs.batched_sim import BatchedSimulator
 from hierloco.envs.frames import world_to_local
-from hierloco.envs.robots import CONTROL_TIMESTEP, RobotSpec, get_robot
+from hierloco.envs.robots import (
+    CONTROL_TIMESTEP,
+    RobotSpec,
+    admissible_gait_periods,
+    derive_gait_period,
+    derive_standing_height,
+    get_robot,
+    robot_fingerprint,
+)
 from hierloco.io import ArtifactError, load_arrays, save_arrays
 
 LIBRARY_FORMAT = 1
@@ -42,7 +57,11 @@ class ExpertLibrary:
         velocity_local: ``G x 2`` mean CoM velocity over the action in its start frame, m/s.
         yaw_rate: ``G`` mean yaw rate over the action, rad/s.
         displacement_local: ``G x 3`` ``(dx, dy, dyaw)`` over the action in the start frame (m, m, rad).
-        metadata: robot, N, gait period, seed, settle time, disabled legs, rejected commands.
+        metadata: robot (name, reference for :func:`get_robot`, source, fingerprint), N, gait period, seed,
+            settle time, disabled legs, rejected commands, command box, tracking summary
+            (:meth:`ExpertTrackingReport.summary`).
+        tracking_error: ``G x 3`` achieved minus commanded ``(vx, vy, yaw_rate)`` (m/s, m/s, rad/s), local frame
+            (computed from the other arrays when not given).
     """
 
     commands: np.ndarray
@@ -53,6 +72,16 @@ class ExpertLibrary:
     yaw_rate: np.ndarray
     displacement_local: np.ndarray
     metadata: dict[str, Any] = field(default_factory=dict)
+    tracking_error: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.tracking_error is None:
+            self.tracking_error = self.achieved - self.commands
+
+    @property
+    def achieved(self) -> np.ndarray:
+        """``G x 3`` achieved ``(vx, vy, yaw_rate)`` over the recorded action (m/s, m/s, rad/s), local frame."""
+        return np.concatenate([self.velocity_local, self.yaw_rate[:, None]], -1)
 
     @property
     def num_experts(self) -> int:
@@ -64,7 +93,8 @@ class ExpertLibrary:
 
     @property
     def robot(self) -> str:
-        return self.metadata["robot"]
+        """The string :func:`get_robot` turns into this library's robot in any process (name or YAML path)."""
+        return self.metadata.get("robot_reference", self.metadata["robot"])
 
     def save(self, path: str | os.PathLike) -> None:
         """Writes the library to ``path`` (``.npz``) atomically."""
@@ -77,7 +107,7 @@ class ExpertLibrary:
         if metadata.get("kind") != "expert_library" or metadata.get("format") != LIBRARY_FORMAT:
             raise ArtifactError(f"{path} is not an expert library of format {LIBRARY_FORMAT}")
         metadata = {k: v for k, v in metadata.items() if k not in ("format", "kind")}
-        missing = set(cls.__dataclass_fields__) - set(arrays) - {"metadata"}
+        missing = set(cls.__dataclass_fields__) - set(arrays) - {"metadata", "tracking_error"}
         if missing:
             raise ArtifactError(f"corrupted expert library {path}: missing {sorted(missing)}")
         return cls(**arrays, metadata=metadata)
@@ -160,13 +190,21 @@ def build_expert_library(
     cmds, targets, states, contacts = (np.stack(x) for x in zip(*records))
     displacement, velocity, yaw_rate = action_motion(states, steps_per_action * CONTROL_TIMESTEP)
     metadata = {
-        "robot": robot.name, "steps_per_action": int(steps_per_action), "gait_period": robot.gait_period,
+        "robot": robot.name, "robot_reference": robot.reference, "robot_source": robot.source,
+        "robot_fingerprint": robot_fingerprint(robot),
+        "steps_per_action": int(steps_per_action), "gait_period": robot.gait_period,
         "seed": int(seed), "settle_time": settle_steps * CONTROL_TIMESTEP, "disabled_legs": list(disabled_legs),
         "joint_names": list(robot.joint_names), "rejected_commands": rejected,
+        "command_low": list(robot.command_low), "command_high": list(robot.command_high),
     }
-    return ExpertLibrary(commands=cmds, joint_targets=targets, com_states=states, foot_contacts=contacts,
-                         velocity_local=velocity, yaw_rate=yaw_rate, displacement_local=displacement,
-                         metadata=metadata)
+    library = ExpertLibrary(commands=cmds, joint_targets=targets, com_states=states, foot_contacts=contacts,
+                            velocity_local=velocity, yaw_rate=yaw_rate, displacement_local=displacement,
+                            metadata=metadata)
+    report = diagnose_expert_library(library, robot=robot)
+    library.metadata["tracking"] = report.summary()
+    if not report.ok:
+        warnings.warn(str(report), RuntimeWarning, stacklevel=2)
+    return library
 
 
 def replay(sim: BatchedSimulator, joint_targets: np.ndarray, num_actions: int):
@@ -174,4 +212,232 @@ def replay(sim: BatchedSimulator, joint_targets: np.ndarray, num_actions: int):
     return sim.run(np.tile(joint_targets, (1, num_actions, 1)))
 
 
-__all__ = ["ExpertLibrary", "action_motion", "build_expert_library", "replay", "sample_commands"]
+# ---------------------------------------------------------------------------------------------------- tracking
+TRACKING_AXES = ("vx", "vy", "yaw_rate")
+TRACKING_UNITS = ("m/s", "m/s", "rad/s")
+_DIRECTIONS = (("forward", "backward"), ("left", "right"), ("counter-clockwise", "clockwise"))
+_VERBS = ("walks", "walks", "turns")
+MIN_REACH = 0.4  # of the box half-width, towards each edge of each axis
+NO_RESPONSE_SLOPE = 0.25  # achieved per commanded below this: the robot ignores the command
+
+
+class ExpertQualityError(ValueError):
+    """The expert gaits do not walk as commanded: the library cannot represent the command box.
+
+    Attributes:
+        report: the :class:`ExpertTrackingReport` that says how far off, in which direction, and what to try.
+    """
+
+    def __init__(self, report: "ExpertTrackingReport"):
+        super().__init__(str(report))
+        self.report = report
+
+
+@dataclass(frozen=True)
+class AxisTracking:
+    """How the experts follow one command axis (``vx``, ``vy`` or ``yaw_rate``) over the command box.
+
+    ``achieved ~ slope * commanded + offset`` is the least-squares line through the experts; ``reach_low`` and
+    ``reach_high`` are how far that line gets from the box centre towards each edge of the box, as a fraction of
+    the box half-width (1: it reaches the edge; 0: it stays at the centre; negative: it goes the other way); the
+    axis is ``ok`` when both reach ``min_reach`` (or when it cannot be assessed: commands that do not vary, a box
+    without extent). Errors are achieved minus commanded, in ``unit``.
+    """
+
+    axis: str
+    unit: str
+    command_low: float
+    command_high: float
+    achieved_low: float
+    achieved_high: float
+    mean_error: float
+    mean_abs_error: float
+    worst_abs_error: float
+    slope: float
+    offset: float
+    reach_low: float
+    reach_high: float
+    min_reach: float
+    ok: bool
+
+    def describe(self) -> str:
+        """One line: the numbers, and for an axis that fails, what goes wrong in words."""
+        u = self.unit
+        line = (f"{self.axis}: commanded {self.command_low:+.2f}..{self.command_high:+.2f} {u}, achieved "
+                f"{self.achieved_low:+.2f}..{self.achieved_high:+.2f} {u}; error mean {self.mean_error:+.3f}, "
+                f"mean |error| {self.mean_abs_error:.3f}, worst |error| {self.worst_abs_error:.3f} {u}")
+        if self.ok:
+            return line
+        index = TRACKING_AXES.index(self.axis)
+        positive, negative = _DIRECTIONS[index]
+        half = (self.command_high - self.command_low) / 2
+        if abs(self.slope) < NO_RESPONSE_SLOPE:
+            middle = self.slope * (self.command_low + self.command_high) / 2 + self.offset
+            if abs(middle) < 0.1 * half:
+                return line + f" -- does not respond to {self.axis} commands"
+            return (line + f" -- {_VERBS[index]} {positive if middle > 0 else negative} at {abs(middle):.2f} {u} "
+                    "whatever the command")
+        problems = []
+        for reach, edge, word in ((self.reach_high, self.command_high, positive),
+                                  (self.reach_low, self.command_low, negative)):
+            if math.isfinite(reach) and reach < self.min_reach:
+                fitted = self.slope * edge + self.offset
+                problems.append(f"towards {word} it reaches {max(reach, 0.0):.0%} of the box ({fitted:+.2f} {u} "
+                                f"when {edge:+.2f} is commanded)")
+        if abs(self.mean_error) > 0.25 * half:
+            problems.append(f"on average it {_VERBS[index][:-1]}s {abs(self.mean_error):.2f} {u} more "
+                            f"{positive if self.mean_error > 0 else negative} than commanded")
+        return line + f" -- achieved ~ {self.slope:.2f} x command {self.offset:+.2f} {u}: " + "; ".join(problems)
+
+
+@dataclass(frozen=True)
+class ExpertTrackingReport:
+    """Whether an expert library can represent its robot's command box (see :func:`diagnose_expert_library`)."""
+
+    robot: str
+    num_experts: int
+    min_reach: float
+    axes: tuple[AxisTracking, ...]
+    advice: tuple[str, ...] = ()
+
+    @property
+    def ok(self) -> bool:
+        return all(axis.ok for axis in self.axes)
+
+    @property
+    def worst_reach(self) -> float:
+        """The smallest reach over axes and sides (NaN when no axis could be assessed)."""
+        reaches = [r for axis in self.axes for r in (axis.reach_low, axis.reach_high) if math.isfinite(r)]
+        return min(reaches) if reaches else math.nan
+
+    def summary(self) -> dict[str, Any]:
+        """A JSON-able summary (NaN as ``None``), as stored in the library's metadata under ``"tracking"``."""
+        def number(x):
+            return float(x) if math.isfinite(x) else None
+        keys = ("mean_error", "mean_abs_error", "worst_abs_error", "slope", "offset", "reach_low", "reach_high")
+        return {"ok": self.ok, "min_reach": self.min_reach, "worst_reach": number(self.worst_reach),
+                "axes": {a.axis: {**{k: number(getattr(a, k)) for k in keys}, "ok": a.ok} for a in self.axes}}
+
+    def __str__(self) -> str:
+        verdict = ("walk as commanded" if self.ok else "do not walk as commanded: the library cannot represent the "
+                   "command box")
+        lines = [f"{self.robot}: the {self.num_experts} experts {verdict} (each axis must reach at least "
+                 f"{self.min_reach:.0%} of the box towards both edges; worst {self.worst_reach:.0%})"]
+        lines += [f"  {axis.describe()}" for axis in self.axes]
+        if not self.ok and self.advice:
+            lines.append("  what to try:")
+            lines += [f"  - {line}" for line in self.advice]
+        return "\n".join(lines)
+
+
+def _axis_tracking(axis: int, commanded: np.ndarray, achieved: np.ndarray, low: float, high: float,
+                   min_reach: float) -> AxisTracking:
+    error = achieved - commanded
+    half, middle = (high - low) / 2, (high + low) / 2
+    slope = offset = reach_low = reach_high = math.nan
+    if len(commanded) >= 2 and np.ptp(commanded) > 1e-9:
+        slope, offset = (float(v) for v in np.polyfit(commanded, achieved, 1))
+        if half > 0:
+            reach_low = (slope * low + offset - middle) / (low - middle)
+            reach_high = (slope * high + offset - middle) / (high - middle)
+    assessed = math.isfinite(reach_low)
+    return AxisTracking(
+        axis=TRACKING_AXES[axis], unit=TRACKING_UNITS[axis], command_low=float(low), command_high=float(high),
+        achieved_low=float(achieved.min()), achieved_high=float(achieved.max()),
+        mean_error=float(error.mean()), mean_abs_error=float(np.abs(error).mean()),
+        worst_abs_error=float(np.abs(error).max()), slope=slope, offset=offset, reach_low=reach_low,
+        reach_high=reach_high, min_reach=float(min_reach),
+        ok=bool(not assessed or (reach_low >= min_reach and reach_high >= min_reach)))
+
+
+def _span(values) -> str:
+    if not values:
+        return "the model's"
+    low, high = min(values), max(values)
+    return f"{low:g}" if low == high else f"{low:g}-{high:g}"
+
+
+def _advice(robot: RobotSpec | None, steps_per_action: int) -> tuple[str, ...]:
+    if robot is None:
+        return ("a longer gait_period", "stiffer kp and more joint_damping",
+                "a standing_height that puts the feet on the floor", "a smaller command box")
+    periods = admissible_gait_periods(len(robot.gait_groups), steps_per_action)
+    derived = derive_gait_period(robot, steps_per_action) if periods else None
+    longer = [p for p in periods if p > robot.gait_period]
+    hint = f"; the size rule gives {derived} s (derive_gait_period)" if derived is not None else ""
+    kp, damping = (_span(values) for values in (robot.kp, robot.joint_damping))
+    return (
+        f"gait_period (now {robot.gait_period} s): longer stances let the legs carry the body{hint}; periods that "
+        f"fit {steps_per_action}-step actions: {', '.join(f'{p:g}' for p in longer) or 'none longer'} s",
+        f"kp (now {kp} N m/rad) and joint_damping (now {damping} N m s/rad): stiffer, better damped servos sag and "
+        "slip less under the body's weight",
+        f"standing_height (now {robot.standing_height:.3f} m; the feet touch the floor at "
+        f"{derive_standing_height(robot):.3f} m) and standing_pose",
+        f"command_low / command_high (now {list(robot.command_low)} / {list(robot.command_high)}): the box must be "
+        "within what the robot can walk",
+    )
+
+
+def diagnose_expert_library(library: ExpertLibrary, *, robot: str | RobotSpec | None = None,
+                            min_reach: float = MIN_REACH) -> ExpertTrackingReport:
+    """How well the experts walk as commanded, axis by axis, over the robot's command box.
+
+    The latent action space can only span what the experts achieve, so what matters is whether their achieved
+    velocities cover the box: per axis, the least-squares line ``achieved ~ slope * commanded + offset`` must get
+    at least ``min_reach`` of the way from the box centre to each edge. Mean, worst and signed errors are reported
+    alongside. At ``min_reach = 0.4`` the built-in robots pass with a wide margin (worst reach 0.9 for A1 and
+    1.2 for Daisy with 50 experts, 0.78 and 1.14 with 6 experts settled 1 s), while a robot that walks backward
+    whatever it is told, or cannot walk forward, fails (docs/robots.md).
+
+    Args:
+        library: the expert library (``G x 3`` commands and what they achieved).
+        robot: its robot (default: ``library.robot``); gives the command box when the library does not record
+            one, and the values quoted in the advice.
+        min_reach: the fraction of the box half-width each axis must reach towards both edges.
+
+    Example:
+        >>> lib = build_expert_library("a1", 6, seed=0, progress=False)  # doctest: +SKIP
+        >>> report = diagnose_expert_library(lib)  # doctest: +SKIP
+        >>> report.ok, round(report.worst_reach, 2)  # doctest: +SKIP
+        (True, 0.9...)
+    """
+    if not (math.isfinite(min_reach) and min_reach > 0):
+        raise ValueError(f"min_reach must be a positive fraction, got {min_reach!r}")
+    if robot is None:
+        try:
+            robot = get_robot(library.robot)
+        except ValueError:
+            robot = None
+    else:
+        robot = get_robot(robot)
+    meta = library.metadata
+    if "command_low" in meta:
+        low, high = np.asarray(meta["command_low"], float), np.asarray(meta["command_high"], float)
+    elif robot is not None:
+        low, high = np.asarray(robot.command_low), np.asarray(robot.command_high)
+    else:
+        raise ValueError(f"expert library of {meta.get('robot')!r} records no command box; pass its robot")
+    achieved = library.achieved
+    axes = tuple(_axis_tracking(i, library.commands[:, i], achieved[:, i], low[i], high[i], min_reach)
+                 for i in range(3))
+    report = ExpertTrackingReport(robot=str(meta.get("robot", "?")), num_experts=library.num_experts,
+                                  min_reach=float(min_reach), axes=axes)
+    if report.ok:
+        return report
+    return ExpertTrackingReport(robot=report.robot, num_experts=report.num_experts, min_reach=report.min_reach,
+                                axes=axes, advice=_advice(robot, library.steps_per_action))
+
+
+def require_expert_library_quality(library: ExpertLibrary, *, robot: str | RobotSpec | None = None,
+                                   min_reach: float = MIN_REACH) -> ExpertTrackingReport:
+    """The :func:`diagnose_expert_library` report; raises :class:`ExpertQualityError` (a ``ValueError``) with
+    it when the experts cannot represent the command box, so a run stops before learning from them."""
+    report = diagnose_expert_library(library, robot=robot, min_reach=min_reach)
+    if not report.ok:
+        raise ExpertQualityError(report)
+    return report
+
+
+__all__ = ["AxisTracking", "ExpertLibrary", "ExpertQualityError", "ExpertTrackingReport", "MIN_REACH",
+           "action_motion", "build_expert_library", "diagnose_expert_library", "replay",
+           "require_expert_library_quality", "sample_commands"]

@@ -1,15 +1,28 @@
-"""The expert library: periodic open-loop gaits that replay to the same CoM motion, saved and loaded safely."""
+"""The expert library: periodic open-loop gaits that replay to the same CoM motion, saved and loaded safely, and
+checked to walk as commanded (experts that cannot represent the command box stop the run)."""
 
 import numpy as np
 import pytest
 
-from hierloco.components.expert_library import ExpertLibrary, action_motion, build_expert_library, replay
+from hierloco.components.expert_library import (
+    MIN_REACH,
+    ExpertLibrary,
+    ExpertQualityError,
+    action_motion,
+    build_expert_library,
+    diagnose_expert_library,
+    replay,
+    require_expert_library_quality,
+)
 from hierloco.envs.batched_sim import BatchedSimulator
-from hierloco.envs.robots import CONTROL_TIMESTEP, get_robot
+from hierloco.envs.robots import CONTROL_TIMESTEP, get_robot, robot_fingerprint
 from hierloco.io import ArtifactError
 from hierloco.plots import plot_gait_diagram
+from tests.envs.test_user_robots import FIXTURE_YAML
 
 NUM_EXPERTS = 6
+TINY_SETTLE_TIME = 1.0  # s, the CI preset's
+WIDE_MARGIN = 1.5  # the built-in robots' worst reach is at least this many times the threshold
 
 
 @pytest.fixture(scope="module", params=["a1", "daisy"])
@@ -89,3 +102,114 @@ def test_gait_diagram(library, tmp_path):
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     # trot and tripod: every leg is in stance roughly half the time, and in swing for a while
     assert np.all((duty > 0.3) & (duty < 0.85)), duty
+
+
+# ---------------------------------------------------------------------------------------------------- tracking
+def test_tracking_is_recorded(library, tmp_path):
+    robot = get_robot(library.robot)
+    achieved = np.c_[library.velocity_local, library.yaw_rate]
+    np.testing.assert_array_equal(library.tracking_error, achieved - library.commands)
+    tracking = library.metadata["tracking"]
+    assert tracking["ok"] and set(tracking["axes"]) == {"vx", "vy", "yaw_rate"}
+    vx = tracking["axes"]["vx"]
+    assert vx["mean_abs_error"] == pytest.approx(np.abs(library.tracking_error[:, 0]).mean())
+    assert vx["worst_abs_error"] == pytest.approx(np.abs(library.tracking_error[:, 0]).max())
+    assert library.metadata["robot_fingerprint"] == robot_fingerprint(robot)
+    assert library.metadata["command_low"] == list(robot.command_low)
+    library.save(tmp_path / "experts.npz")
+    np.testing.assert_array_equal(ExpertLibrary.load(tmp_path / "experts.npz").tracking_error, library.tracking_error)
+
+
+@pytest.mark.parametrize("name", ["a1", "daisy"])
+def test_builtin_experts_walk_as_commanded_at_the_tiny_preset(name):
+    """6 experts settled 1 s (the CI preset): worst reach 0.96 (A1) and 1.14 (Daisy) against the 0.4 threshold."""
+    lib = build_expert_library(name, NUM_EXPERTS, seed=0, settle_time=TINY_SETTLE_TIME, progress=False)
+    report = require_expert_library_quality(lib)
+    assert report.ok and report.worst_reach >= WIDE_MARGIN * MIN_REACH, str(report)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["a1", "daisy"])
+def test_builtin_experts_walk_as_commanded_at_paper_scale(name):
+    """50 experts settled 3 s: worst reach 0.90-0.93 (A1) and 1.21-1.26 (Daisy) over seeds 0-2."""
+    lib = build_expert_library(name, 50, seed=0, progress=False)
+    report = require_expert_library_quality(lib)
+    assert report.worst_reach >= 2 * MIN_REACH, str(report)
+
+
+@pytest.fixture(scope="module")
+def quadruped20():
+    """The 20 kg fixture robot with its derived 0.5 s gait period and with a 0.2 s one."""
+    robot = get_robot(str(FIXTURE_YAML))
+    with pytest.warns(RuntimeWarning, match="do not walk as commanded"):
+        short = build_expert_library(robot.replace(gait_period=0.2), NUM_EXPERTS, seed=0, progress=False)
+    return robot, build_expert_library(robot, NUM_EXPERTS, seed=0, progress=False), short
+
+
+def test_user_robot_with_a_suitable_gait_period_walks_as_commanded(quadruped20):
+    robot, library, _ = quadruped20
+    assert robot.gait_period == 0.5  # derived from its size
+    report = require_expert_library_quality(library)
+    assert report.worst_reach >= WIDE_MARGIN * MIN_REACH, str(report)
+
+
+def test_user_robot_with_a_too_short_gait_period_stops_the_run(quadruped20):
+    """0.2 s trot: about 0.75 x command - 0.14 m/s forward, so it cannot walk forward faster than 0.08 m/s."""
+    robot, _, library = quadruped20
+    with pytest.raises(ExpertQualityError) as caught:
+        require_expert_library_quality(library, robot=robot.replace(gait_period=0.2))
+    report = caught.value.report
+    assert isinstance(caught.value, ValueError) and not report.ok
+    vx, vy, yaw = report.axes
+    assert not vx.ok and vy.ok and yaw.ok
+    assert vx.reach_high < MIN_REACH and vx.mean_error < -0.1
+    message = str(caught.value)
+    for part in ("do not walk as commanded", "vx: commanded -0.30..+0.30 m/s", "towards forward it reaches",
+                 "more backward than commanded", "gait_period (now 0.2 s)", "the size rule gives 0.5 s",
+                 "kp (now 150 N m/rad)", "standing_height (now 0.375 m"):
+        assert part in message, message
+
+
+def test_user_robot_trot_alternates_diagonal_stance(quadruped20, tmp_path):
+    """The fixture's feet (foot sites exactly the size of the foot spheres) show a trot in the gait diagram."""
+    robot, library, _ = quadruped20
+    contacts = library.foot_contacts[0]  # N x L, legs FR, FL, RR, RL
+    fr, fl, rr, rl = contacts.T
+    assert np.mean(fr == rl) > 0.9 and np.mean(fl == rr) > 0.9  # diagonal pairs together
+    assert np.mean(fr != fl) > 0.5  # the two pairs take turns
+    periods = round(library.steps_per_action * CONTROL_TIMESTEP / robot.gait_period)
+    for leg in contacts.T:  # each foot touches down once per gait cycle
+        assert np.sum(leg & ~np.roll(leg, 1)) == periods
+    duty = plot_gait_diagram(contacts, robot.leg_names, tmp_path / "gait.png", action_steps=library.steps_per_action)
+    assert np.all((duty > 0.3) & (duty < 0.85)), duty
+
+
+def _synthetic_library(achieved: np.ndarray, commands: np.ndarray) -> ExpertLibrary:
+    """An expert library holding only commands and achieved motion, for oracle tests of the diagnosis."""
+    g = len(commands)
+    return ExpertLibrary(commands=commands, joint_targets=np.zeros((g, 100, 12)), com_states=np.zeros((g, 101, 5)),
+                         foot_contacts=np.zeros((g, 100, 4), bool), velocity_local=achieved[:, :2],
+                         yaw_rate=achieved[:, 2], displacement_local=np.zeros((g, 3)),
+                         metadata={"robot": "a1", "command_low": [-0.3, -0.3, -0.5], "command_high": [0.3, 0.3, 0.5]})
+
+
+def test_diagnosis_says_how_far_off_and_in_which_direction():
+    commands = np.stack(np.meshgrid([-0.3, 0.0, 0.3], [-0.3, 0.3], [-0.5, 0.5]), -1).reshape(-1, 3)
+    achieved = commands.copy()
+    achieved[:, 0] = -0.3  # walks backward at 0.3 m/s whatever the command
+    achieved[:, 2] = 0.01 * commands[:, 2]  # does not turn
+    with pytest.raises(ExpertQualityError) as caught:
+        require_expert_library_quality(_synthetic_library(achieved, commands))
+    vx, vy, yaw = caught.value.report.axes
+    assert (vx.ok, vy.ok, yaw.ok) == (False, True, False)
+    assert vx.mean_error == pytest.approx(-0.3) and vx.worst_abs_error == pytest.approx(0.6)
+    assert vx.reach_low == pytest.approx(1.0) and vx.reach_high == pytest.approx(-1.0)
+    message = str(caught.value)
+    assert "vx: commanded -0.30..+0.30 m/s, achieved -0.30..-0.30 m/s" in message
+    assert "walks backward at 0.30 m/s whatever the command" in message
+    assert "does not respond to yaw_rate commands" in message
+    assert "what to try" in message and "gait_period (now 0.2 s)" in message  # A1's values, from the registry
+    perfect = diagnose_expert_library(_synthetic_library(commands.copy(), commands))
+    assert perfect.ok and perfect.worst_reach == pytest.approx(1.0)
+    with pytest.raises(ValueError, match="min_reach must be a positive fraction"):
+        diagnose_expert_library(_synthetic_library(commands.copy(), commands), min_reach=float("nan"))

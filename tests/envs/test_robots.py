@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import mujoco
 import numpy as np
 import pytest
@@ -19,6 +21,7 @@ from hierloco.envs.robots import (
     robot_from_mjcf,
     standing_qpos,
 )
+from tests.envs.test_user_robots import FIXTURE_YAML
 from tests.envs.toy_robot import TOY_FOOT_RADIUS, TOY_QUADRUPED_XML, TOY_STANDING_HEIGHT, make_toy_robot
 
 STANDING_DURATION = 10.0  # s
@@ -35,7 +38,7 @@ def _forward(robot, qpos=None):
 
 
 # ---------------------------------------------------------------- every robot: the compiled model's contract
-@pytest.mark.parametrize("name", sorted(ROBOTS))
+@pytest.mark.parametrize("name", sorted(ROBOTS) + [str(FIXTURE_YAML)], ids=lambda n: Path(n).stem)
 def test_compiled_model_contract(name):
     robot = get_robot(name)
     model = compile_model(robot)
@@ -59,6 +62,7 @@ def test_compiled_model_contract(name):
 def test_registry_holds_a1_and_daisy():
     assert get_robot("a1") is A1 and get_robot("daisy") is DAISY
     assert get_robot(A1) is A1
+    assert A1.source == DAISY.source == "builtin" and A1.reference == "a1"
 
 
 # ---------------------------------------------------------------- A1
@@ -115,8 +119,10 @@ def _stand(robot):
     return base, data.warning
 
 
-@pytest.mark.parametrize("robot", [A1, DAISY, make_toy_robot("site")], ids=lambda r: r.name)
+@pytest.mark.parametrize("robot", [A1, DAISY, make_toy_robot("site"), get_robot(str(FIXTURE_YAML))],
+                         ids=lambda r: r.name)
 def test_stands_10_s_from_the_standing_pose(robot):
+    """Also the 20 kg fixture, whose standing height is derived, not given."""
     base, warnings = _stand(robot)
     assert all(w.number == 0 for w in warnings), "MuJoCo warned during a standing simulation"
     assert np.all(np.isfinite(base))
@@ -172,11 +178,11 @@ def test_user_robot_errors_name_the_problem():
     feet = {leg: f"{leg}_toe" for leg in legs}
     with pytest.raises(ValueError, match="'nowhere'.*neither a site nor a body"):
         robot_from_mjcf(TOY_QUADRUPED_XML, feet={**feet, "RL": "nowhere"}, kp=[40.0] * 12, **common)
-    with pytest.raises(ValueError, match="no position servo; give RobotSpec.kp"):
+    with pytest.raises(ValueError, match="no position servo; give kp"):
         compile_model(robot_from_mjcf(TOY_QUADRUPED_XML, feet=feet, **common))  # torque motors and no kp
-    with pytest.raises(ValueError, match="kp has 3 values for 12 joints"):
-        robot_from_mjcf(TOY_QUADRUPED_XML, feet=feet, kp=[40.0] * 3, **common)
-    with pytest.raises(ValueError, match="standing_pose has 3 angles for 12 joints"):
-        robot_from_mjcf(TOY_QUADRUPED_XML, feet=feet, kp=[40.0] * 12, **{**common, "standing_pose": [0.0] * 3})
+    with pytest.raises(ValueError, match="kp has 5 values for 12 joints"):
+        robot_from_mjcf(TOY_QUADRUPED_XML, feet=feet, kp=[40.0] * 5, **common)
+    with pytest.raises(ValueError, match="standing_pose has 4 values for 12 joints"):
+        robot_from_mjcf(TOY_QUADRUPED_XML, feet=feet, kp=[40.0] * 12, **{**common, "standing_pose": [0.0] * 4})
     with pytest.raises(FileNotFoundError, match="no such file"):
         robot_from_mjcf("/nonexistent/robot.xml", feet=feet, **common)

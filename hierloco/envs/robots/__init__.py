@@ -1,50 +1,51 @@
-"""Robots: the :class:`RobotSpec` description, the built-in A1 and Daisy, and a registry by name."""
+"""Robots: the :class:`RobotSpec` description, the built-in A1 and Daisy, users' own robots (MJCF, YAML, entry
+points) and a registry by name (see ``docs/robots.md``)."""
 
 from __future__ import annotations
 
 from hierloco.envs.robots.a1 import A1
 from hierloco.envs.robots.daisy import DAISY
-from hierloco.envs.robots.fingerprint import robot_fingerprint
 from hierloco.envs.robots.mjcf import robot_from_mjcf
+from hierloco.envs.robots.registry import (
+    ENTRY_POINT_GROUP,
+    ROBOTS,
+    available_robots,
+    get_robot,
+    register_robot,
+    robot_reference,
+)
 from hierloco.envs.robots.spec import (
     CONTROL_TIMESTEP,
     LOCK_PREFIX,
-    TOUCH_SENSOR_PREFIX,
     PHYSICS_STEPS_PER_CONTROL,
     PHYSICS_TIMESTEP,
     START_YAW,
+    STEPS_PER_ACTION,
+    TOUCH_SENSOR_PREFIX,
+    TOUCH_SITE_PREFIX,
     Leg,
     Obstacle,
     RobotSpec,
+    admissible_gait_periods,
     compile_model,
+    derive_gait_period,
+    derive_standing_height,
+    foot_geoms,
     joint_qpos_indices,
     joint_qvel_indices,
+    robot_fingerprint,
     standing_qpos,
 )
-
-ROBOTS: dict[str, RobotSpec] = {}
-
-
-def register_robot(robot: RobotSpec) -> RobotSpec:
-    """Make ``robot`` available by its name to :func:`get_robot` (and so to every recipe)."""
-    ROBOTS[robot.name] = robot
-    return robot
-
-
-def get_robot(robot: str | RobotSpec) -> RobotSpec:
-    """The robot description for a registered name, or ``robot`` itself if it is already a description."""
-    if isinstance(robot, RobotSpec):
-        return robot
-    if robot not in ROBOTS:
-        raise ValueError(f"unknown robot {robot!r}; registered robots: {sorted(ROBOTS)}")
-    return ROBOTS[robot]
-
+from hierloco.envs.robots.yaml_robot import load_robot_yaml
 
 register_robot(A1)
 register_robot(DAISY)
 
 __all__ = [
-    "A1", "DAISY", "ROBOTS", "CONTROL_TIMESTEP", "LOCK_PREFIX", "TOUCH_SENSOR_PREFIX", "PHYSICS_STEPS_PER_CONTROL",
-    "PHYSICS_TIMESTEP", "START_YAW", "Leg", "Obstacle", "RobotSpec", "compile_model", "get_robot",
-    "joint_qpos_indices", "joint_qvel_indices", "register_robot", "robot_fingerprint", "robot_from_mjcf", "standing_qpos",
+    "A1", "DAISY", "ROBOTS", "CONTROL_TIMESTEP", "ENTRY_POINT_GROUP", "LOCK_PREFIX", "TOUCH_SENSOR_PREFIX",
+    "TOUCH_SITE_PREFIX", "PHYSICS_STEPS_PER_CONTROL", "PHYSICS_TIMESTEP", "START_YAW", "STEPS_PER_ACTION", "Leg",
+    "Obstacle", "RobotSpec", "admissible_gait_periods", "available_robots", "compile_model", "derive_gait_period",
+    "derive_standing_height", "foot_geoms", "get_robot", "joint_qpos_indices", "joint_qvel_indices",
+    "load_robot_yaml", "register_robot", "robot_fingerprint", "robot_from_mjcf", "robot_reference",
+    "standing_qpos",
 ]

@@ -1,4 +1,4 @@
-"""Unitree A1 quadruped, built procedurally from its published physical facts (SPEC 3).
+"""Unitree A1 quadruped, built procedurally from its published physical facts.
 
 Primitive geoms only: a box trunk, capsule links and sphere feet. Only the trunk and the feet collide (with the
 floor); the links carry mass and inertia. Legs are ordered FR, FL, RR, RL; each has an abduction joint (axis x),
@@ -95,6 +95,7 @@ A1 = RobotSpec(
     kp=(KP,) * 12,
     torque_limit=(TORQUE_LIMIT,) * 12,
     description="Unitree A1 quadruped, 12.45 kg, trot",
+    source="builtin",
 )
 
 __all__ = ["A1", "build_a1_spec"]

@@ -1,4 +1,4 @@
-"""HEBI Daisy hexapod, built procedurally from its published physical facts (SPEC 3).
+"""HEBI Daisy hexapod, built procedurally from its published physical facts.
 
 Six legs at 30, -30, 90, -90, 150 and -150 deg around the body centre (FL, FR, ML, MR, RL, RR), each with a base
 yaw joint (axis z), a shoulder pitch and an elbow pitch joint (positive lifts the link), two 0.325 m links and a
@@ -102,6 +102,7 @@ DAISY = RobotSpec(
     kp=KP * 6,
     torque_limit=TORQUE_LIMIT * 6,
     description="HEBI Daisy hexapod, 19.34 kg (2.39 kg per leg + 5 kg chassis), tripod",
+    source="builtin",
 )
 
 __all__ = ["DAISY", "build_daisy_spec", "nominal_leg_pose"]

@@ -8,10 +8,18 @@ uses, so that A1, Daisy and a user's own robot all look the same downstream:
 - a floor and a free joint on the base body are added when the robot has none;
 - every leg joint is driven by a MuJoCo position actuator (PD servo), in leg order, so ``ctrl[i]`` is the joint
   target of ``robot.joint_names[i]``; torque ``motor`` actuators are converted with the description's gains;
-- each foot gets a touch sensor, each leg joint a (normally inactive) lock that holds it at its standing angle,
-  which is how legs are disabled in the adverse setting;
+- each foot gets a touch sensor on a site of hierloco's own, centred on the foot's collision geom and a quarter
+  larger than it (plus the contact margin), so that stance registers even when the model's own foot site is
+  exactly the size of the foot (the contact point then lies on or just outside the site, and MuJoCo's touch
+  sensor misses it);
+- each leg joint gets a (normally inactive) lock that holds it at its standing angle, which is how legs are
+  disabled in the adverse setting;
 - physics runs at ``PHYSICS_TIMESTEP`` and with solver warm-starting off, so that a state fully determines the
   future (chained batched rollouts and step-by-step simulation agree exactly).
+
+What can be derived need not be given: the standing height comes from forward kinematics of the standing pose
+(:func:`derive_standing_height`), the gait period from the robot's size (:func:`derive_gait_period`).
+:func:`robot_fingerprint` digests a description and its compiled model, for cache keys.
 
 Example:
     >>> from hierloco.envs.robots import get_robot, compile_model
@@ -23,8 +31,13 @@ Example:
 from __future__ import annotations
 
 import dataclasses
+import difflib
+import hashlib
+import json
+import math
+import numbers
 from dataclasses import dataclass, field
-from typing import Callable, Sequence
+from typing import Callable, Iterable, Sequence
 
 import mujoco
 import numpy as np
@@ -32,10 +45,55 @@ import numpy as np
 PHYSICS_TIMESTEP = 0.002  # s
 CONTROL_TIMESTEP = 0.01  # s (100 Hz low-level control)
 PHYSICS_STEPS_PER_CONTROL = 5
+STEPS_PER_ACTION = 100  # control steps of one latent action (N in Li et al., RA-L 2021)
+GRAVITY = 9.81  # m/s^2
 
 FLOOR_NAME = "floor"
 TOUCH_SENSOR_PREFIX = "touch_"
+TOUCH_SITE_PREFIX = "hierloco_touch_"
+TOUCH_SITE_SCALE = 1.25  # touch site radius / foot geom bounding radius
 LOCK_PREFIX = "lock_"
+MIN_LEGS = 3
+MIN_SWING_STEPS = 2  # control steps per swing phase, at least
+
+BUILTIN_SOURCE = "builtin"
+PYTHON_SOURCE = "python"
+YAML_SOURCE_PREFIX = "yaml:"
+ENTRY_POINT_SOURCE_PREFIX = "entry_point:"
+MODIFIED_MARK = " (modified: "
+
+
+def missing_name_message(kind: str, name: str, candidates: Iterable[str]) -> str:
+    """``"no joint named 'FR_hipp' (close: 'FR_hip')"``: a name that is not there, with the close ones (ignoring
+    case), or the names there are."""
+    candidates = sorted({c for c in candidates if c})
+    lowered = {}
+    for candidate in candidates:
+        lowered.setdefault(candidate.lower(), candidate)
+    close = [lowered[c] for c in difflib.get_close_matches(str(name).lower(), list(lowered), n=4, cutoff=0.5)]
+    if close:
+        hint = "close: " + ", ".join(repr(c) for c in close)
+    elif candidates:
+        hint = f"{kind}s: " + ", ".join(repr(c) for c in candidates[:12]) + (", ..." if len(candidates) > 12 else "")
+    else:
+        hint = f"there are no {kind}s"
+    return f"no {kind} named {name!r} ({hint})"
+
+
+def check_leg_count(where: str, legs: Sequence[str]) -> None:
+    """Refuses fewer than ``MIN_LEGS`` legs, saying why."""
+    if len(legs) < MIN_LEGS:
+        raise ValueError(f"{where}: legs: has {len(legs)} legs {list(legs)}; hierloco's expert gaits (Raibert "
+                         f"footsteps alternating between gait groups) need at least {MIN_LEGS} legs")
+
+
+def is_number(value) -> bool:
+    """A real number (int, float, NumPy scalar), not a bool."""
+    return isinstance(value, numbers.Real) and not isinstance(value, bool)
+
+
+def _finite(value) -> bool:
+    return is_number(value) and math.isfinite(value)
 
 
 @dataclass(frozen=True)
@@ -47,29 +105,47 @@ class Leg:
     foot_site: str
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class RobotSpec:
     """A legged robot, described for hierloco.
+
+    Every check runs here, before any simulation: a bad description is a :class:`ValueError` naming the field
+    (and the joint or leg).
 
     Args:
         name: registry name, e.g. ``"a1"``.
         build_spec: returns a fresh :class:`mujoco.MjSpec` of the robot (floor and free joint optional).
-        legs: the legs, in the order their joints appear in every joint vector.
+        legs: the legs (at least 3: hierloco's expert gaits alternate footholds between gait groups), in the order
+            their joints appear in every joint vector.
         base_body: name of the free-floating body whose frame is the robot's CoM frame.
         standing_pose: joint angles in rad, one per joint of ``joint_names``.
-        standing_height: height of the base above the floor in the standing pose, in m.
-        gait_groups: groups of leg names that are in stance together (trot pairs, tripods), in gait order.
-        gait_period: duration of one gait cycle in s; a latent action holds a whole number of them.
-        min_height: the robot has fallen when its base is lower than this, in m.
+        gait_groups: groups of leg names that are in stance together (trot pairs, tripods), in gait order; at
+            least two groups, every leg in exactly one.
         command_low, command_high: the box of nominal CoM commands ``(vx, vy, yaw_rate)`` in m/s, m/s, rad/s,
             in the robot's local (yaw) frame.
         rear_legs: the legs disabled in the adverse setting.
+        standing_height: height of the base above the floor in the standing pose, in m (default: derived,
+            :func:`derive_standing_height`).
+        gait_period: duration of one gait cycle in s; a latent action holds a whole number of them (default:
+            derived from the robot's size, :func:`derive_gait_period`).
+        min_height: the robot has fallen when its base is lower than this, in m (default: half the standing
+            height).
         swing_height: foot lift of the expert gait, in m.
         max_roll, max_pitch: the robot has fallen when its roll or pitch exceeds these, in rad.
         kp: position gain per joint in N m / rad, used when the model drives its joints with torque motors
             (and for the actuators hierloco builds itself).
         torque_limit: actuator torque limit per joint in N m (``None`` keeps the model's own).
-        joint_damping: damping per joint in N m s / rad added when the model has none (``None``: leave as is).
+        joint_damping: damping per joint in N m s / rad (``None`` keeps the model's own).
+        description: a line for reports.
+        source: where the description came from, for reports: ``"builtin"``, ``"python"``,
+            ``"yaml:<path>"``, ``"entry_point:<name> = <module:object>"`` (see :attr:`reference`).
+
+    Example:
+        >>> from hierloco.envs.robots import A1
+        >>> A1.num_joints, A1.leg_names
+        (12, ('FR', 'FL', 'RR', 'RL'))
+        >>> A1.replace(gait_period=0.5).source
+        'builtin (modified: gait_period)'
     """
 
     name: str
@@ -77,13 +153,13 @@ class RobotSpec:
     legs: tuple[Leg, ...]
     base_body: str
     standing_pose: tuple[float, ...]
-    standing_height: float
     gait_groups: tuple[tuple[str, ...], ...]
-    gait_period: float
-    min_height: float
     command_low: tuple[float, float, float]
     command_high: tuple[float, float, float]
     rear_legs: tuple[str, ...]
+    standing_height: float | None = None
+    gait_period: float | None = None
+    min_height: float | None = None
     swing_height: float = 0.06
     max_roll: float = 0.5
     max_pitch: float = 0.5
@@ -91,32 +167,95 @@ class RobotSpec:
     torque_limit: tuple[float, ...] | None = None
     joint_damping: tuple[float, ...] | None = None
     description: str = field(default="", compare=False)
+    source: str = field(default=PYTHON_SOURCE, compare=False)
 
     def __post_init__(self):
+        if not isinstance(self.name, str) or not self.name:
+            raise ValueError(f"robot name must be a non-empty string, got {self.name!r}")
+        where = f"robot {self.name!r}"
+        if not callable(self.build_spec):
+            raise ValueError(f"{where}: build_spec must be a callable returning a mujoco.MjSpec")
+        self._check_legs(where)
+        joints = self.joint_names
+        if len(self.standing_pose) != len(joints):
+            raise ValueError(f"{where}: standing_pose has {len(self.standing_pose)} angles for {len(joints)} joints")
+        for joint, angle in zip(joints, self.standing_pose):
+            if not _finite(angle):
+                raise ValueError(f"{where}: standing_pose of joint {joint!r} must be a finite number of rad, "
+                                 f"got {angle!r}")
+        for name in ("kp", "torque_limit", "joint_damping"):
+            values = getattr(self, name)
+            if values is None:
+                continue
+            if len(values) != len(joints):
+                raise ValueError(f"{where}: {name} has {len(values)} values for {len(joints)} joints")
+            for joint, value in zip(joints, values):
+                if not (_finite(value) and value > 0):
+                    raise ValueError(f"{where}: {name} of joint {joint!r} must be a finite positive number, "
+                                     f"got {value!r}")
+        self._check_gait_groups(where)
+        for name in ("command_low", "command_high"):
+            values = getattr(self, name)
+            if len(values) != 3 or not all(_finite(v) for v in values):
+                raise ValueError(f"{where}: {name} must be 3 finite numbers (vx m/s, vy m/s, yaw_rate rad/s), "
+                                 f"got {values!r}")
+        if any(lo > hi for lo, hi in zip(self.command_low, self.command_high)):
+            raise ValueError(f"{where}: command_low {self.command_low} exceeds command_high {self.command_high}")
+        for name in ("swing_height", "max_roll", "max_pitch") + tuple(
+                n for n in ("standing_height", "gait_period") if getattr(self, n) is not None):
+            value = getattr(self, name)
+            if not (_finite(value) and value > 0):
+                raise ValueError(f"{where}: {name} must be a finite positive number, got {value!r}")
+        if self.min_height is not None and not (_finite(self.min_height) and self.min_height >= 0):
+            raise ValueError(f"{where}: min_height must be a finite number >= 0, got {self.min_height!r}")
+        # derive what was not given (one compiled model for both)
+        if self.standing_height is None or self.gait_period is None:
+            height, hip_height = _standing_geometry(self)
+            if self.standing_height is None:
+                if not height > 0:
+                    raise ValueError(f"{where}: cannot derive standing_height: in the standing pose the lowest foot "
+                                     f"is {-height:.3f} m above the base; give standing_height")
+                object.__setattr__(self, "standing_height", float(height))
+            if self.gait_period is None:
+                object.__setattr__(self, "gait_period", _period_for_hip_height(self, hip_height))
+        if self.min_height is None:
+            object.__setattr__(self, "min_height", float(self.standing_height) / 2)
+        if not self.standing_height > self.min_height:
+            raise ValueError(f"{where}: need standing_height ({self.standing_height}) > min_height "
+                             f"({self.min_height})")
+
+    def _check_legs(self, where: str) -> None:
+        names = [leg.name for leg in self.legs]
+        check_leg_count(where, names)
+        if len(set(names)) != len(names):
+            raise ValueError(f"{where}: two legs share a name: {names}")
+        for leg in self.legs:
+            if not leg.joints:
+                raise ValueError(f"{where}: leg {leg.name!r} has no joints")
         joints = self.joint_names
         if len(set(joints)) != len(joints):
-            raise ValueError(f"robot {self.name!r}: a joint appears in two legs: {joints}")
-        if len(self.standing_pose) != len(joints):
-            raise ValueError(
-                f"robot {self.name!r}: standing_pose has {len(self.standing_pose)} angles for {len(joints)} joints"
-            )
-        for name in ("kp", "torque_limit", "joint_damping"):
-            value = getattr(self, name)
-            if value is not None and len(value) != len(joints):
-                raise ValueError(f"robot {self.name!r}: {name} has {len(value)} values for {len(joints)} joints")
-        names = set(self.leg_names)
+            repeated = sorted({j for j in joints if joints.count(j) > 1})
+            raise ValueError(f"{where}: joints {repeated} appear twice in legs")
+
+    def _check_gait_groups(self, where: str) -> None:
+        names = self.leg_names
+        if len(self.gait_groups) < 2 or any(len(group) == 0 for group in self.gait_groups):
+            raise ValueError(f"{where}: gait_groups must be at least two non-empty groups of legs, "
+                             f"got {self.gait_groups}")
         for group in self.gait_groups:
-            unknown = set(group) - names
-            if unknown:
-                raise ValueError(f"robot {self.name!r}: gait group {group} names unknown legs {sorted(unknown)}")
-        if sorted(leg for group in self.gait_groups for leg in group) != sorted(names):
-            raise ValueError(f"robot {self.name!r}: gait groups {self.gait_groups} must hold every leg exactly once")
-        if set(self.rear_legs) - names:
-            raise ValueError(f"robot {self.name!r}: rear_legs {self.rear_legs} are not legs of the robot")
-        if not (self.gait_period > 0 and self.standing_height > self.min_height >= 0):
-            raise ValueError(f"robot {self.name!r}: need gait_period > 0 and standing_height > min_height >= 0")
-        if any(lo > hi for lo, hi in zip(self.command_low, self.command_high)):
-            raise ValueError(f"robot {self.name!r}: command_low {self.command_low} exceeds command_high")
+            for leg in group:
+                if leg not in names:
+                    raise ValueError(f"{where}: gait_groups: group {list(group)} names an unknown leg: "
+                                     f"{missing_name_message('leg', leg, names)}")
+        listed = [leg for group in self.gait_groups for leg in group]
+        if sorted(listed) != sorted(names):
+            missing = sorted(set(names) - set(listed))
+            twice = sorted({leg for leg in listed if listed.count(leg) > 1})
+            raise ValueError(f"{where}: gait_groups {self.gait_groups} must hold every leg exactly once "
+                             f"(missing {missing}, twice {twice})")
+        for leg in self.rear_legs:
+            if leg not in names:
+                raise ValueError(f"{where}: rear_legs {list(self.rear_legs)}: {missing_name_message('leg', leg, names)}")
 
     @property
     def leg_names(self) -> tuple[str, ...]:
@@ -131,6 +270,14 @@ class RobotSpec:
     def num_joints(self) -> int:
         return len(self.joint_names)
 
+    @property
+    def reference(self) -> str:
+        """The string :func:`hierloco.envs.robots.get_robot` turns back into this robot in any process: the YAML
+        file's absolute path for a robot loaded from YAML (and not modified since), else the registry name."""
+        if self.source.startswith(YAML_SOURCE_PREFIX) and MODIFIED_MARK not in self.source:
+            return self.source[len(YAML_SOURCE_PREFIX):]
+        return self.name
+
     def leg_joint_indices(self, legs: Sequence[str]) -> np.ndarray:
         """Indices into the joint vector of the joints of ``legs``."""
         unknown = [leg for leg in legs if leg not in self.leg_names]
@@ -144,7 +291,16 @@ class RobotSpec:
         return np.asarray(indices, dtype=np.int64)
 
     def replace(self, **changes) -> "RobotSpec":
-        """A copy with some fields changed (e.g. a different gait period)."""
+        """A copy with some fields changed (e.g. a different gait period); its :attr:`source` says so.
+
+        Derived values are kept; pass ``standing_height=None`` or ``gait_period=None`` to derive them again.
+        """
+        if "source" not in changes:
+            changed = sorted(changes)
+            base, _, previous = self.source.partition(MODIFIED_MARK)
+            if previous:
+                changed = sorted(set(changed) | set(previous.rstrip(")").split(", ")))
+            changes["source"] = f"{base}{MODIFIED_MARK}{', '.join(changed)})"
         return dataclasses.replace(self, **changes)
 
 
@@ -165,7 +321,8 @@ def compile_model(robot: RobotSpec, disabled_legs: Sequence[str] = (),
     in a world with static ``obstacles`` (an arena).
 
     Returns a :class:`mujoco.MjModel` whose ``nu`` actuators are position servos on ``robot.joint_names`` in that
-    order, with one touch sensor per foot (in leg order) and nothing else in ``sensordata``.
+    order, with one touch sensor per foot (in leg order, on the sites ``hierloco_touch_<leg>``) and nothing else
+    in ``sensordata``.
     """
     disabled = set(disabled_legs)
     robot.leg_joint_indices(sorted(disabled))  # validates the names
@@ -176,7 +333,8 @@ def compile_model(robot: RobotSpec, disabled_legs: Sequence[str] = (),
 
     base = spec.body(robot.base_body)
     if base is None:
-        raise ValueError(f"robot {robot.name!r}: the model has no body named {robot.base_body!r}")
+        raise ValueError(f"robot {robot.name!r}: base_body: "
+                         f"{missing_name_message('body', robot.base_body, [b.name for b in spec.bodies])}")
     if not any(j.type == mujoco.mjtJoint.mjJNT_FREE for j in base.joints):
         if base.parent is not None and base.parent.name != "world":
             raise ValueError(f"robot {robot.name!r}: base body {robot.base_body!r} is not a child of the world")
@@ -188,14 +346,39 @@ def compile_model(robot: RobotSpec, disabled_legs: Sequence[str] = (),
                                 quat=[np.cos(obstacle.yaw / 2), 0, 0, np.sin(obstacle.yaw / 2)],
                                 rgba=[0.55, 0.45, 0.35, 1], contype=1, conaffinity=1)
     _set_actuators(spec, robot)
+    for sensor in list(spec.sensors):
+        spec.delete(sensor)
     _add_foot_sensors(spec, robot)
     _add_joint_locks(spec, robot, disabled)
-    for sensor in list(spec.sensors):
-        if not sensor.name.startswith(TOUCH_SENSOR_PREFIX):
-            spec.delete(sensor)
     model = spec.compile()
     _check_model(model, robot)
     return model
+
+
+def foot_geoms(model: mujoco.MjModel, robot: RobotSpec) -> np.ndarray:
+    """``L`` ids of the foot geoms, in leg order: per leg, of the colliding geoms (``contype`` or ``conaffinity``
+    set) on the leg (the subtree of the body of its first joint), the one nearest to the foot site in the
+    model's reference configuration."""
+    data = mujoco.MjData(model)
+    mujoco.mj_kinematics(model, data)
+    colliding = np.flatnonzero((model.geom_contype != 0) | (model.geom_conaffinity != 0))
+    ids = []
+    for leg in robot.legs:
+        site = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, leg.foot_site)
+        top = model.jnt_bodyid[model.joint(leg.joints[0]).id]
+        on_leg = [g for g in colliding if _in_subtree(model, model.geom_bodyid[g], top)]
+        if not on_leg:
+            raise ValueError(f"robot {robot.name!r}: leg {leg.name!r} has no colliding geom (contype or "
+                             "conaffinity set) to stand on")
+        distance = np.linalg.norm(data.geom_xpos[on_leg] - data.site_xpos[site], axis=1)
+        ids.append(on_leg[int(np.argmin(distance))])
+    return np.asarray(ids, dtype=np.int64)
+
+
+def _in_subtree(model: mujoco.MjModel, body: int, root: int) -> bool:
+    while body != root and body != 0:
+        body = model.body_parentid[body]
+    return body == root
 
 
 def _ensure_floor(spec: mujoco.MjSpec) -> None:
@@ -244,20 +427,20 @@ def _set_actuators(spec: mujoco.MjSpec, robot: RobotSpec) -> None:
     for i, joint_name in enumerate(robot.joint_names):
         joint = spec.joint(joint_name)
         if joint is None:
-            raise ValueError(f"robot {robot.name!r}: the model has no joint named {joint_name!r}")
+            raise ValueError(f"robot {robot.name!r}: legs: "
+                             f"{missing_name_message('joint', joint_name, [j.name for j in spec.joints])}")
         if joint.type != mujoco.mjtJoint.mjJNT_HINGE:
             raise ValueError(f"robot {robot.name!r}: leg joint {joint_name!r} is not a hinge")
         kp, kv, limit = found.get(joint_name, (None, 0.0, None))
         if robot.kp is not None:
             kp = robot.kp[i]
         if kp is None:
-            raise ValueError(
-                f"robot {robot.name!r}: joint {joint_name!r} has no position servo; give RobotSpec.kp to convert it"
-            )
+            raise ValueError(f"robot {robot.name!r}: joint {joint_name!r} has no position servo; give kp (N m / rad, "
+                             "RobotSpec.kp) to turn its motor into one")
         if robot.torque_limit is not None:
             limit = robot.torque_limit[i]
         if robot.joint_damping is not None:
-            joint.damping = robot.joint_damping[i]
+            joint.damping = [robot.joint_damping[i], 0.0, 0.0]  # (linear, higher-order terms) in MuJoCo 3.x
         act = spec.add_actuator(name=f"servo_{joint_name}", target=joint_name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
         act.set_to_position(kp=kp, kv=kv)
         lo, hi = joint.range if joint.limited != mujoco.mjtLimited.mjLIMITED_FALSE else (-np.pi, np.pi)
@@ -270,16 +453,23 @@ def _set_actuators(spec: mujoco.MjSpec, robot: RobotSpec) -> None:
 
 
 def _add_foot_sensors(spec: mujoco.MjSpec, robot: RobotSpec) -> None:
+    """One touch sensor per foot, on a site of its own around the foot geom (see the module docstring)."""
+    site_names = [s.name for s in spec.sites]
     for leg in robot.legs:
-        site = spec.site(leg.foot_site)
-        if site is None:
-            raise ValueError(f"robot {robot.name!r}: the model has no foot site {leg.foot_site!r} for leg {leg.name!r}")
-        spec.add_sensor(
-            name=f"{TOUCH_SENSOR_PREFIX}{leg.name}",
-            type=mujoco.mjtSensor.mjSENS_TOUCH,
-            objtype=mujoco.mjtObj.mjOBJ_SITE,
-            objname=leg.foot_site,
-        )
+        if spec.site(leg.foot_site) is None:
+            raise ValueError(f"robot {robot.name!r}: foot site of leg {leg.name!r}: "
+                             f"{missing_name_message('site', leg.foot_site, site_names)}")
+    probe = spec.compile()
+    margin = float(probe.geom_margin.max(initial=0.0))  # a contact forms up to this far outside the foot
+    for leg, geom in zip(robot.legs, foot_geoms(probe, robot)):
+        body_id = probe.geom_bodyid[geom]
+        body = spec.body(probe.body(body_id).name) if probe.body(body_id).name else spec.bodies[body_id]
+        site = f"{TOUCH_SITE_PREFIX}{leg.name}"
+        body.add_site(name=site, pos=probe.geom_pos[geom], size=[TOUCH_SITE_SCALE * probe.geom_rbound[geom] + margin,
+                                                                  0, 0],
+                      group=5, rgba=[0, 0, 0, 0])
+        spec.add_sensor(name=f"{TOUCH_SENSOR_PREFIX}{leg.name}", type=mujoco.mjtSensor.mjSENS_TOUCH,
+                        objtype=mujoco.mjtObj.mjOBJ_SITE, objname=site)
 
 
 def _add_joint_locks(spec: mujoco.MjSpec, robot: RobotSpec, disabled: set[str]) -> None:
@@ -316,7 +506,7 @@ def joint_qvel_indices(model: mujoco.MjModel, robot: RobotSpec) -> np.ndarray:
     return np.array([model.jnt_dofadr[model.joint(name).id] for name in robot.joint_names], dtype=np.int64)
 
 
-START_YAW = np.pi / 2  # rad: every episode starts at the origin facing +y (SPEC 6)
+START_YAW = np.pi / 2  # rad: every episode starts at the origin facing +y
 
 
 def standing_qpos(model: mujoco.MjModel, robot: RobotSpec, x: float = 0.0, y: float = 0.0,
@@ -327,3 +517,124 @@ def standing_qpos(model: mujoco.MjModel, robot: RobotSpec, x: float = 0.0, y: fl
     qpos[3:7] = (np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2))
     qpos[joint_qpos_indices(model, robot)] = robot.standing_pose
     return qpos
+
+
+# ---------------------------------------------------------------------------------------------------- derived values
+def _geom_bottom(model: mujoco.MjModel, data: mujoco.MjData, geom: int) -> float:
+    """World height in m of the lowest point of ``geom`` (exact for primitives, its bounding box otherwise)."""
+    z = float(data.geom_xpos[geom][2])
+    up = data.geom_xmat[geom].reshape(3, 3)[2]  # world z component of each geom axis
+    size = model.geom_size[geom]
+    kind = model.geom_type[geom]
+    if kind == mujoco.mjtGeom.mjGEOM_SPHERE:
+        return z - size[0]
+    if kind == mujoco.mjtGeom.mjGEOM_CAPSULE:
+        return z - abs(up[2]) * size[1] - size[0]
+    if kind == mujoco.mjtGeom.mjGEOM_CYLINDER:
+        return z - abs(up[2]) * size[1] - size[0] * math.sqrt(max(0.0, 1.0 - up[2] ** 2))
+    if kind == mujoco.mjtGeom.mjGEOM_ELLIPSOID:
+        return z - float(np.linalg.norm(up * size))
+    if kind == mujoco.mjtGeom.mjGEOM_BOX:
+        return z - float(np.abs(up) @ size)
+    centre, half = model.geom_aabb[geom][:3], model.geom_aabb[geom][3:]
+    return z + float(up @ centre) - float(np.abs(up) @ half)
+
+
+def _standing_geometry(robot: RobotSpec) -> tuple[float, float]:
+    """In the standing pose with the base level: the base's height and the mean height of the legs' first joints
+    above the bottom of the lowest foot geom, in m."""
+    model = compile_model(robot)
+    data = mujoco.MjData(model)
+    data.qpos[:] = model.qpos0
+    data.qpos[0:7] = (0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)
+    data.qpos[joint_qpos_indices(model, robot)] = robot.standing_pose
+    mujoco.mj_kinematics(model, data)
+    floor = min(_geom_bottom(model, data, g) for g in foot_geoms(model, robot))
+    base = float(data.xpos[model.body(robot.base_body).id][2])
+    hips = [float(data.xanchor[model.joint(leg.joints[0]).id][2]) for leg in robot.legs]
+    return float(base - floor), float(np.mean(hips) - floor)
+
+
+def derive_standing_height(robot: RobotSpec) -> float:
+    """The base height in m that puts the feet on the floor: in the standing pose with the base level, how far the
+    bottom of the lowest foot geom lies below the base.
+
+    Example:
+        >>> from hierloco.envs.robots import A1
+        >>> round(derive_standing_height(A1), 4)  # 2 x 0.2 m cos(0.9) + 0.02 m foot radius (A1 states 0.27 m)
+        0.2686
+    """
+    return _standing_geometry(robot)[0]
+
+
+def admissible_gait_periods(num_groups: int, steps_per_action: int = STEPS_PER_ACTION) -> tuple[float, ...]:
+    """Gait periods in s that the expert gaits can use: a whole number P of control steps that divides
+    ``steps_per_action`` (an action holds whole gait cycles) and splits into ``num_groups`` swing phases of at
+    least ``MIN_SWING_STEPS`` whole steps each.
+
+    Example:
+        >>> admissible_gait_periods(2)
+        (0.04, 0.1, 0.2, 0.5, 1.0)
+    """
+    return tuple(round(p * CONTROL_TIMESTEP, 10) for p in range(1, int(steps_per_action) + 1)
+                 if steps_per_action % p == 0 and p % num_groups == 0 and p // num_groups >= MIN_SWING_STEPS)
+
+
+def _period_for_hip_height(robot: RobotSpec, hip_height: float, steps_per_action: int = STEPS_PER_ACTION) -> float:
+    periods = admissible_gait_periods(len(robot.gait_groups), steps_per_action)
+    if not periods:
+        raise ValueError(f"robot {robot.name!r}: no gait period splits {steps_per_action} control steps into whole "
+                         f"cycles of {len(robot.gait_groups)} swing phases; give gait_period")
+    if not hip_height > 0:
+        raise ValueError(f"robot {robot.name!r}: cannot derive gait_period: the legs' first joints are not above the "
+                         "feet in the standing pose; give gait_period")
+    target = math.pi * math.sqrt(hip_height / GRAVITY)
+    return min(periods, key=lambda period: abs(math.log(period / target)))
+
+
+def derive_gait_period(robot: RobotSpec, steps_per_action: int = STEPS_PER_ACTION) -> float:
+    """A gait period in s suited to the robot's size.
+
+    The rule: the period is ``pi * sqrt(h / g)`` (half the swing period of a pendulum as long as the legs are
+    high; by dynamic similarity at equal Froude number, gait times scale with ``sqrt(h / g)``), where ``h`` is the
+    mean height of the legs' first joints above the floor in the standing pose, rounded to the nearest (in ratio)
+    of :func:`admissible_gait_periods`, so that a latent action of ``steps_per_action`` control steps holds whole
+    gait cycles and each swing phase is a whole number of steps. A1 (h = 0.27 m) and Daisy (0.23 m) get 0.5 s,
+    a 20 kg quadruped with 0.25 m leg links (0.37 m) too; a robot with 1 m legs gets 1 s.
+
+    Example:
+        >>> from hierloco.envs.robots import A1, DAISY
+        >>> derive_gait_period(A1), derive_gait_period(DAISY)
+        (0.5, 0.5)
+    """
+    return _period_for_hip_height(robot, _standing_geometry(robot)[1], steps_per_action)
+
+
+# ---------------------------------------------------------------------------------------------------- fingerprint
+FINGERPRINT_VERSION = b"hierloco robot fingerprint 1"
+_NOT_FINGERPRINTED = ("build_spec", "source")
+
+
+def robot_fingerprint(robot: RobotSpec) -> str:
+    """A hex sha256 digest of the robot: its compiled model (the MJB bytes of :func:`compile_model`) and every
+    field of its description but the model builder and :attr:`RobotSpec.source`. Two descriptions with the same
+    fingerprint simulate the same robot the same way; a changed gain, gait period or MJCF file changes it, whatever
+    the name. Deterministic across processes; computed once per :class:`RobotSpec` instance.
+
+    Example:
+        >>> from hierloco.envs.robots import A1
+        >>> robot_fingerprint(A1) == robot_fingerprint(A1.replace(kp=(120.0,) * 12))
+        False
+    """
+    cached = robot.__dict__.get("_fingerprint")
+    if cached is not None:
+        return cached
+    model = compile_model(robot)
+    mjb = np.empty(mujoco.mj_sizeModel(model), dtype=np.uint8)
+    mujoco.mj_saveModel(model, None, mjb)
+    fields = {f.name: getattr(robot, f.name) for f in dataclasses.fields(robot) if f.name not in _NOT_FINGERPRINTED}
+    fields["legs"] = [dataclasses.asdict(leg) for leg in robot.legs]
+    text = json.dumps(fields, sort_keys=True, default=float).encode()
+    digest = hashlib.sha256(FINGERPRINT_VERSION + b"\0" + text + b"\0" + mjb.tobytes()).hexdigest()
+    object.__setattr__(robot, "_fingerprint", digest)
+    return digest
