@@ -74,6 +74,15 @@ def digest(key: dict) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:12]
 
 
+def _describe_holder(lock: Path) -> str:
+    try:
+        info = json.loads(lock.read_text() or "{}")
+    except (OSError, json.JSONDecodeError):
+        info = {}
+    return f"pid {info.get('pid', '?')} on {info.get('host', '?')} since {info.get('started', '?')}: " \
+           f"{info.get('command', '?')}"
+
+
 def _diff(stored: dict, wanted: dict, prefix: str = "") -> list[str]:
     lines = []
     for key in sorted(set(stored) | set(wanted)):
@@ -118,6 +127,28 @@ class RunDirectory:
         self._lock_fd: int | None = None
 
     # ------------------------------------------------------------------------------------------------ lock
+    def holder(self) -> str | None:
+        """Who holds the run directory (pid, host, start, command), or ``None`` when it is free. Writes nothing."""
+        lock = self.path / LOCK_NAME
+        if not lock.exists() or self._lock_fd is not None:
+            return None
+        fd = os.open(lock, os.O_RDONLY)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            fcntl.flock(fd, fcntl.LOCK_UN)
+            return None
+        except BlockingIOError:
+            return _describe_holder(lock)
+        finally:
+            os.close(fd)
+
+    def check_free(self) -> None:
+        """Raises :class:`RunLockedError` naming the holder when another process holds the directory."""
+        who = self.holder()
+        if who is not None:
+            raise RunLockedError(f"run directory {self.path} is in use by {who}; wait for it to finish or choose "
+                                 "another run_dir")
+
     def acquire(self, holder: str | None = None) -> None:
         """Takes the run directory for this process; raises :class:`RunLockedError` naming the holder if another
         process has it. A lock left by a killed process is taken over. No-op when read-only."""
@@ -130,14 +161,8 @@ class RunDirectory:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             os.close(fd)
-            try:
-                info = json.loads(lock.read_text() or "{}")
-            except (OSError, json.JSONDecodeError):
-                info = {}
-            who = (f"pid {info.get('pid', '?')} on {info.get('host', '?')} since {info.get('started', '?')}: "
-                   f"{info.get('command', '?')}")
-            raise RunLockedError(f"run directory {self.path} is in use by {who}; wait for it to finish or choose "
-                                 "another run_dir") from None
+            raise RunLockedError(f"run directory {self.path} is in use by {_describe_holder(lock)}; wait for it to "
+                                 "finish or choose another run_dir") from None
         info = {"pid": os.getpid(), "host": socket.gethostname(), "started": time.strftime("%Y-%m-%d %H:%M:%S"),
                 "command": holder or " ".join(sys.argv)}
         os.ftruncate(fd, 0)

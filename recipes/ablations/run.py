@@ -42,7 +42,9 @@ def check(cfg) -> None:
 
 
 def jobs(cfg) -> list:
-    robot = str(Path(cfg.robot).resolve()) if str(cfg.robot).endswith((".yaml", ".yml")) else cfg.robot
+    from hierloco.envs.robots import robot_reference
+
+    robot = robot_reference(cfg.robot)  # a YAML robot as an absolute path: every worker finds it
     planned = []
     for name in cfg.run:
         spec = cfg.ablations[name]

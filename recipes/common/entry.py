@@ -29,12 +29,10 @@ def user_errors() -> tuple[type[BaseException], ...]:
     from recipes.common.config import ConfigError
 
     errors = [ConfigError, ArtifactError, RunLockedError, ReadOnlyRunError, OmegaConfBaseException]
-    try:
-        from hierloco.components.expert_library import ExpertQualityError
-        errors.append(ExpertQualityError)
-    except ImportError:
-        pass
-    return tuple(errors)
+    from hierloco.components.expert_library import ExpertQualityError
+    from recipes.common.stages import GaitPolicyQualityError
+
+    return (*errors, ExpertQualityError, GaitPolicyQualityError)
 
 
 def one_line(error: BaseException) -> str:

@@ -44,12 +44,6 @@ def default_threads() -> int:
         return os.cpu_count() or 1
 
 
-def robot_reference(cfg) -> str:
-    """How the robot is named in the manifest: a registered name, or the absolute path of its YAML file."""
-    text = str(cfg.robot)
-    return str(Path(text).resolve()) if text.endswith((".yaml", ".yml")) and Path(text).exists() else text
-
-
 def resolve_run_dir(cfg, method: str, robot) -> Path:
     """``run_dir``, or by default ``outputs/<method>/<preset>/<robot>_seed<seed>``; in a Hydra multirun the
     job's overrides are appended, so the jobs of a sweep never share a directory."""
@@ -106,6 +100,8 @@ class Run:
         CURRENT["stage"] = name
         artifact = self.dir.stage(name, stage.key, lambda: build(self, stage.params, *inputs),
                                   lambda a, path: a.save(path), stage.artifact.load, stage.filename)
+        if stage.check is not None:
+            stage.check(self, artifact)
         if isinstance(artifact, TaskEvaluation):
             self.evaluations[(stage.params["setting"], stage.params["task_name"])] = artifact
         else:
@@ -206,6 +202,7 @@ def open_run(cfg: DictConfig, method: str, plan: Callable, checks: Callable | No
     directory = RunDirectory(resolve_run_dir(cfg, method, robot))
     CURRENT.update(run_dir=str(directory.path), stage=None)
     specs = [stage.spec for stage in stages]
+    directory.check_free()  # another process's run is named first: its stages may not match ours yet
     done = directory.verify(specs)  # before anything is written
     unfinished = [name for name, finished in done.items() if is_training(name) and not finished]
     if EVALUATE and unfinished:
@@ -215,7 +212,7 @@ def open_run(cfg: DictConfig, method: str, plan: Callable, checks: Callable | No
     directory.verify(specs)  # again, now that no other process can write it
     logger = None
     if not directory.readonly and not EVALUATE:
-        info = {"method": method, "robot": robot_reference(cfg), "seed": int(cfg.seed), "settings": list(cfg.settings),
+        info = {"method": method, "robot": robot.reference, "seed": int(cfg.seed), "settings": list(cfg.settings),
                 "planner": section(cfg, "planner") if "planner" in cfg else {},
                 **(manifest(cfg, robot) if manifest is not None else {})}
         write_text(directory.path / MANIFEST, json.dumps(info, indent=2))

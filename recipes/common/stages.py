@@ -15,6 +15,7 @@ Stages, in order (see ``docs/index.md`` for the paper's steps):
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from typing import Any, Callable
 
@@ -25,7 +26,7 @@ from omegaconf import OmegaConf
 from hierloco.components.com_model import TrainedCoMModel, train_com_model
 from hierloco.components.dynamics_data import TransitionData, collect_transitions
 from hierloco.components.evaluation import check_gait_policy, run_task
-from hierloco.components.expert_library import ExpertLibrary, build_expert_library
+from hierloco.components.expert_library import ExpertLibrary, build_expert_library, require_expert_library_quality
 from hierloco.components.gait_policy import TrainedGaitPolicy, train_gait_policy
 from hierloco.envs.latent_env import LatentActionEnv
 from hierloco.envs.robots import CONTROL_TIMESTEP
@@ -55,6 +56,10 @@ class GaitPolicyCheck(JsonReport):
               "interpolation_between": float}
 
 
+class GaitPolicyQualityError(ValueError):
+    """The latent gait policy does not reproduce enough of its experts in simulation."""
+
+
 @dataclass(frozen=True)
 class Stage:
     """One cached stage: ``build(run, params, *inputs)`` makes the artifact (a class with ``save(path)`` and
@@ -66,6 +71,7 @@ class Stage:
     filename: str
     artifact: Any
     build: Callable
+    check: Callable | None = None  # check(run, artifact): raises when the artifact is unfit (cached or not)
 
     @property
     def key(self) -> dict:
@@ -83,14 +89,22 @@ class Stage:
 # ---------------------------------------------------------------------------------------------------- experts
 def experts_stage(cfg, robot_digest: str) -> Stage:
     params = {"seed": cfg.seed, "steps_per_action": cfg.steps_per_action, **section(cfg, "experts")}
-    return Stage("experts", params, {"robot": robot_digest}, "experts.npz",
-                 ExpertLibrary, build_experts)
+    return Stage("experts", params, {"robot": robot_digest}, "experts.npz", ExpertLibrary, build_experts,
+                 check_experts)
 
 
 def build_experts(run, params) -> ExpertLibrary:
     """The expert library, checked to walk as commanded (Li et al., Sec. III-A)."""
-    return build_expert_library(run.robot, params["num_experts"], steps_per_action=params["steps_per_action"],
-                                seed=params["seed"], settle_time=params["settle_time"], progress=run.progress)
+    with warnings.catch_warnings():  # check_experts raises with the same diagnosis, in one line
+        warnings.filterwarnings("ignore", message=".*do not walk as commanded", category=RuntimeWarning)
+        return build_expert_library(run.robot, params["num_experts"], steps_per_action=params["steps_per_action"],
+                                    seed=params["seed"], settle_time=params["settle_time"], progress=run.progress)
+
+
+def check_experts(run, library: ExpertLibrary) -> None:
+    """Stops the run (:class:`ExpertQualityError`, with a diagnosis) when the experts do not cover the command
+    box: how far off, in which direction, what to try."""
+    require_expert_library_quality(library, robot=run.robot, min_reach=run.cfg.checks.min_expert_reach)
 
 
 # ---------------------------------------------------------------------------------------------------- gait policy
@@ -111,13 +125,27 @@ def build_gait_policy(run, params, library: ExpertLibrary) -> TrainedGaitPolicy:
 
 def gait_policy_check_stage(cfg, policy: Stage) -> Stage:
     return Stage("gait_policy_check", {"seed": cfg.seed, "num_pairs": 50, "num_actions": 4},
-                 {"gait_policy": policy.digest}, "gait_policy_check.json", GaitPolicyCheck, build_gait_policy_check)
+                 {"gait_policy": policy.digest}, "gait_policy_check.json", GaitPolicyCheck, build_gait_policy_check,
+                 check_gait_policy_reproduction)
 
 
 def build_gait_policy_check(run, params, low_level, library: ExpertLibrary) -> GaitPolicyCheck:
     """Reproduction of every expert and interpolation between pairs by ``pi(., z)``, in simulation."""
     latents = low_level.trained.latents.numpy()
     return GaitPolicyCheck(check_gait_policy(low_level, library, latents, **params))
+
+
+def check_gait_policy_reproduction(run, check: GaitPolicyCheck) -> None:
+    """Stops the run when ``pi(., z_g)`` reproduces fewer than ``checks.min_reproduced_fraction`` of the experts."""
+    wanted = run.cfg.checks.min_reproduced_fraction
+    if check["reproduced_fraction"] < wanted:
+        errors = np.asarray(check["reproduction_error"], dtype=float)
+        raise GaitPolicyQualityError(
+            f"the gait policy reproduces {100 * check['reproduced_fraction']:.0f}% of the experts within 0.05 m/s in "
+            f"simulation (need {100 * wanted:.0f}%; median error {np.median(errors):.2f} m/s, worst "
+            f"{np.max(errors):.2f} m/s, {int(np.isinf(errors).sum())} fell): train it longer (policy.epochs) or "
+            "wider (policy.hidden), or let the experts settle longer (experts.settle_time); "
+            "checks.min_reproduced_fraction sets the bar")
 
 
 def latent_low_level(policy: Stage) -> dict:

@@ -46,11 +46,6 @@ def check(cfg) -> list:
     return robots
 
 
-def robot_override(robot: str) -> str:
-    """A robot YAML path as an absolute path, so that every worker finds it."""
-    return str(Path(robot).resolve()) if str(robot).endswith((".yaml", ".yml")) else str(robot)
-
-
 def jobs(cfg, robots) -> list:
     planned = []
     for robot, spec in zip(cfg.robots, robots):
@@ -60,7 +55,7 @@ def jobs(cfg, robots) -> list:
                 continue
             for seed in cfg.seeds:
                 run_dir = Path("outputs") / method / cfg.preset_name / f"{spec.name}_seed{seed}"
-                overrides = [f"preset={cfg.preset_name}", f"robot={robot_override(robot)}", f"seed={seed}",
+                overrides = [f"preset={cfg.preset_name}", f"robot={spec.reference}", f"seed={seed}",
                              f"settings=[{','.join(settings)}]", "progress=false", *cfg.overrides,
                              *cfg.method_overrides.get(method, [])]
                 planned.append(studies.Job(method, str(run_dir), overrides))

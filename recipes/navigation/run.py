@@ -22,7 +22,7 @@ from recipes.common.entry import recipe_main  # noqa: E402
 from hierloco.components.evaluation import run_task  # noqa: E402
 from hierloco.envs.latent_env import LatentActionEnv  # noqa: E402
 from hierloco.envs.navigation import clearance, cluttered_arena, plan_path  # noqa: E402
-from hierloco.envs.robots import ROBOTS  # noqa: E402
+from hierloco.envs.robots import get_robot  # noqa: E402
 from hierloco.envs.tasks import TrajectoryTracking  # noqa: E402
 from hierloco.io import write_text  # noqa: E402
 from hierloco.plots import plot_navigation  # noqa: E402
@@ -31,7 +31,11 @@ from hierloco.render import render_frames, save_video  # noqa: E402
 
 
 def validate(cfg: DictConfig) -> None:
-    problems = [] if cfg.robot in ROBOTS else [f"unknown robot {cfg.robot!r} (registered: {sorted(ROBOTS)})"]
+    problems = []
+    try:
+        get_robot(cfg.robot)
+    except (ValueError, OSError) as error:
+        problems.append(str(error))
     if not (cfg.inflation >= 0 and cfg.speed > 0 and cfg.arena.num_obstacles >= 0):
         problems.append("need inflation >= 0 m, speed > 0 m/s and arena.num_obstacles >= 0")
     if problems:

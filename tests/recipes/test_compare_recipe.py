@@ -1,4 +1,5 @@
-"""The comparison study: runs the method recipes, then writes the comparison table and bar charts."""
+"""The comparison study: method recipes as jobs on a real local Ray instance, then the comparison table and charts.
+Through Ray it gives exactly what running the same jobs one by one gives; a re-run reuses every finished job."""
 
 import os
 import subprocess
@@ -8,26 +9,59 @@ from pathlib import Path
 from hierloco.results import read_csv
 
 ROOT = Path(__file__).resolve().parents[2]
+SMALL = ["eval.generalization=null", "eval.videos=[]", "eval.figures=false"]
 
 
-def test_compare_tiny(tmp_path):
-    out = tmp_path / "compare"
+def compare(cwd, *overrides):
     env = {**os.environ, "WANDB_MODE": "offline"}
     command = [sys.executable, str(ROOT / "recipes" / "compare" / "run.py"), "preset=tiny", "robots=[a1]",
-               "methods=[lat,lib]", "settings=[normal]", f"out_dir={out}", 'overrides=["progress=false"]']
-    result = subprocess.run(command, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+               "methods=[lat,lib]", "seeds=[0,1]", "settings=[normal]", f"overrides={SMALL}".replace("'", '"'),
+               *overrides]
+    return subprocess.run(command, cwd=cwd, env=env, capture_output=True, text=True, timeout=1200)
+
+
+def test_compare_through_ray_equals_the_jobs_one_by_one(tmp_path):
+    by_ray = tmp_path / "ray"
+    by_ray.mkdir()
+    result = compare(by_ray, f"out_dir={by_ray / 'out'}")
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
-    rows = read_csv(out / "comparison.csv")
-    assert {r["method"] for r in rows} == {"lat", "lib"}
-    table = (out / "comparison.md").read_text()
+    assert "study: 4 jobs, 0 reused" in result.stdout and "study: 4 done, 0 running, 0 failed" in result.stdout
+
+    one_by_one = []
+    for method in ("lat", "lib"):
+        for seed in (0, 1):
+            run_dir = tmp_path / "single" / f"{method}_{seed}"
+            done = subprocess.run([sys.executable, str(ROOT / "recipes" / method / "train.py"), "preset=tiny",
+                                   "robot=a1", f"seed={seed}", "settings=[normal]", "progress=false",
+                                   f"run_dir={run_dir}", *SMALL], cwd=tmp_path, capture_output=True, text=True,
+                                  timeout=900)
+            assert done.returncode == 0, done.stderr[-2000:]
+            one_by_one += read_csv(run_dir / "episodes.csv")
+    through_ray = read_csv(by_ray / "out" / "comparison.csv")
+    key = lambda r: (r["method"], r["seed"], r["task"], r["episode"])  # noqa: E731
+    assert sorted(through_ray, key=key) == sorted(one_by_one, key=key)
+    table = (by_ray / "out" / "comparison.md").read_text()
     assert "| lat | a1 | normal | goal_reaching |" in table and "| lib | a1 | normal | goal_reaching |" in table
-    assert (out / "comparison_normal.png").read_bytes()[:4] == b"\x89PNG"
-    # each method ran in its own run directory, which a re-run reuses
-    assert (tmp_path / "outputs" / "lib" / "tiny" / "a1_seed0" / "results.csv").exists()
+    assert (by_ray / "out" / "comparison_normal.png").read_bytes()[:4] == b"\x89PNG"
+    assert (by_ray / "outputs" / "lib" / "tiny" / "a1_seed1" / "job.json").exists()
+
+    # a re-run (say, after the study was killed) reuses every finished job without submitting it
+    again = compare(by_ray, f"out_dir={by_ray / 'out'}")
+    assert again.returncode == 0 and "study: 4 jobs, 4 reused" in again.stdout, again.stdout[-2000:]
+    assert read_csv(by_ray / "out" / "comparison.csv") == through_ray
+
+
+def test_a_failed_job_is_reported_and_the_others_go_on(tmp_path):
+    result = compare(tmp_path, f"out_dir={tmp_path / 'out'}", "methods=[lib,ik]", "seeds=[0]",
+                     "method_overrides={ik: [dynamics.num_transitions=5]}")
+    assert result.returncode == 1
+    assert "failed: ik in" in result.stderr and "num_transitions" in result.stderr, result.stderr[-2000:]
+    assert {r["method"] for r in read_csv(tmp_path / "out" / "comparison.csv")} == {"lib"}
 
 
 def test_compare_refuses_unknown_method(tmp_path):
     command = [sys.executable, str(ROOT / "recipes" / "compare" / "run.py"), "methods=[magic]",
                f"out_dir={tmp_path}"]
     result = subprocess.run(command, cwd=tmp_path, capture_output=True, text=True, timeout=120)
-    assert result.returncode != 0 and "unknown method" in result.stderr
+    assert result.returncode == 2 and "unknown method 'magic'" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
