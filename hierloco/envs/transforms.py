@@ -18,6 +18,7 @@ from torchrl.data import Composite, Unbounded
 from torchrl.envs.transforms import Transform
 
 from hierloco.envs.frames import world_to_local
+from hierloco.envs.locomotion import LocomotionEnv
 from hierloco.envs.robots import LOCK_PREFIX, RobotSpec, get_robot
 
 
@@ -89,10 +90,10 @@ class DisableLegs(Transform):
 
     def _physics(self):
         env = self.parent.base_env if self.parent is not None else None
-        physics = getattr(getattr(env, "_env", None), "physics", None)
-        if physics is None:
-            raise RuntimeError("DisableLegs must sit on an env made by hierloco.envs.make_env (a dm_control env)")
-        return physics
+        if not isinstance(env, LocomotionEnv):
+            raise RuntimeError("DisableLegs must sit on an env made by hierloco.envs.make_env (a LocomotionEnv), "
+                               f"got {type(env).__name__}")
+        return env.physics
 
 
 class TaskTransform(Transform):

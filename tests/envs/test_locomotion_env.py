@@ -99,7 +99,7 @@ def test_physics_blow_up_sets_terminated_and_warns():
     robot = get_robot("a1")
     env = make_env("a1", seed=0)
     td = env.reset()
-    physics = env.base_env._env.physics  # the dm_control Physics under the TorchRL wrapper
+    physics = env.base_env.physics  # the dm_control Physics under the TorchRL wrapper
     physics.data.qvel[8] = 1e11  # beyond MuJoCo's limit: it warns and resets the data
     td.set("action", torch.as_tensor(robot.standing_pose, dtype=torch.float32))
     with pytest.warns(RuntimeWarning, match="physics became unstable"):
