@@ -16,7 +16,7 @@ from typing import Sequence
 
 import torch
 from tensordict import TensorDictBase
-from torchrl.data import Composite, Unbounded
+from torchrl.data import Categorical, Composite, Unbounded
 from torchrl.envs.transforms import Compose, StepCounter, Transform
 
 from hierloco.envs.frames import world_to_local
@@ -213,6 +213,42 @@ def task_transforms(task, episodes: Sequence[int] | None = None, *, state_key: s
 def TaskTransform(task, episodes: Sequence[int] | None = None, state_key: str = "com_state") -> Compose:  # noqa: N802
     """Deprecated name of :func:`task_transforms`, kept for existing callers."""
     return task_transforms(task, episodes, state_key=state_key)
+
+
+class ContinueAfterFalls(Transform):
+    """Evaluation episodes that run their full length: a robot that falls (or whose physics blows up) is not reset
+    but keeps being simulated and scored, and the fall is recorded instead of ending its episode.
+
+    Moves the base env's ``terminated`` into ``fallen`` (``B x 1`` bool, true from the step the robot failed until
+    the next reset) and clears ``terminated`` (``done`` keeps only the truncation), so that
+    ``env.rollout(..., break_when_any_done=False)`` never resets a fallen robot mid-episode. Sits first, right on
+    the base env. Not for training: a collector would never reset a fallen robot.
+
+    Args:
+        out_key: where the fall flag is written.
+    """
+
+    def __init__(self, out_key: str = "fallen"):
+        super().__init__(in_keys=["terminated"], out_keys=[out_key])
+
+    def _reset(self, tensordict: TensorDictBase, tensordict_reset: TensorDictBase) -> TensorDictBase:
+        fallen = torch.zeros((*tensordict_reset.batch_size, 1), dtype=torch.bool, device=tensordict_reset.device)
+        if tensordict is not None and "_reset" in tensordict.keys() and self.out_keys[0] in tensordict.keys():
+            fallen = tensordict.get(self.out_keys[0]) & ~tensordict.get("_reset")
+        tensordict_reset.set(self.out_keys[0], fallen)
+        return tensordict_reset
+
+    def _step(self, tensordict: TensorDictBase, next_tensordict: TensorDictBase) -> TensorDictBase:
+        terminated = next_tensordict.get("terminated")
+        next_tensordict.set(self.out_keys[0], tensordict.get(self.out_keys[0]) | terminated)
+        next_tensordict.set("terminated", torch.zeros_like(terminated))
+        next_tensordict.set("done", next_tensordict.get("truncated").clone())
+        return next_tensordict
+
+    def transform_observation_spec(self, observation_spec: Composite) -> Composite:
+        observation_spec[self.out_keys[0]] = Categorical(2, (*observation_spec.shape, 1), dtype=torch.bool,
+                                                         device=observation_spec.device)
+        return observation_spec
 
 
 class GoalObservation(Transform):
