@@ -1,4 +1,5 @@
-"""Run directories: each pipeline stage's artifact is cached with the config that made it (SPEC 9).
+"""Run directories: each pipeline stage's artifact is cached with the config that made it (``docs/index.md``,
+Runs and artifacts).
 
 ``RunDirectory.stage(name, config, build, save, load)`` returns the stage's result: loaded from disk when the
 artifact exists and was made with the same config, built (then saved atomically, config first) otherwise. An

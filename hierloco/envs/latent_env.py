@@ -1,4 +1,5 @@
-"""The latent-action environment: a TorchRL env whose step is one whole high-level action on B robots (SPEC 5.2).
+"""The latent-action environment: a TorchRL env whose step is one whole high-level action on B robots (Li et al.,
+RA-L 2021, Sec. III-A: the high level acts at about 1 Hz, the low level at 100 Hz).
 
 For LAT the action is a latent z in the learned latent box and a step runs ``pi(., z)`` for N control steps (1 s)
 on every robot through the batched simulator; with another low level the action is an expert index (LIB) or a

@@ -1,4 +1,5 @@
-"""Planner oracle tests: with a known analytic model the planners find the exact argmin (SPEC 5.4)."""
+"""Planner oracle tests: with a known analytic model the planners find the exact argmin (Li et al., RA-L 2021,
+Sec. III-A.2)."""
 
 import math
 

@@ -1,4 +1,4 @@
-"""Tasks and the normalised-cost metric against the numbers of SPEC 6."""
+"""Tasks and the normalised-cost metric against the numbers of Li et al., RA-L 2021, Sec. IV-A."""
 
 import math
 

@@ -1,4 +1,5 @@
-"""The LAT recipe end to end with the tiny preset: outputs, cached stages, refusals (SPEC 9, 11)."""
+"""The LAT recipe end to end with the tiny preset: outputs, cached stages, refusals (``docs/index.md``, Runs and
+artifacts)."""
 
 import csv
 import json
