@@ -29,6 +29,7 @@ from __future__ import annotations
 import collections
 import contextlib
 import math
+import numbers
 import warnings
 from typing import Sequence
 
@@ -90,13 +91,9 @@ def reset_joint_noise(rng, scale: float, num_robots: int, num_joints: int, locke
 
 def check_joint_noise(scale) -> float:
     """``scale`` as a float, or a ``ValueError`` when it is not a finite number >= 0 (rad)."""
-    try:
-        value = float(scale)
-    except (TypeError, ValueError):
-        raise ValueError(f"init_joint_noise must be a number of rad >= 0, got {scale!r}") from None
-    if not (math.isfinite(value) and value >= 0):
+    if isinstance(scale, bool) or not isinstance(scale, numbers.Real) or not (math.isfinite(scale) and scale >= 0):
         raise ValueError(f"init_joint_noise must be a finite number of rad >= 0, got {scale!r}")
-    return value
+    return float(scale)
 
 
 def joint_target_limits(model: mujoco.MjModel) -> tuple[np.ndarray, np.ndarray]:

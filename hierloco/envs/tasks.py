@@ -393,30 +393,32 @@ TASKS = {"velocity_tracking": VelocityTracking, "goal_reaching": GoalReaching,
          "trajectory_tracking": TrajectoryTracking}
 
 
-def task_options(name: str) -> list[str]:
-    """The keyword options of the task registered as ``name`` (its constructor's arguments)."""
-    if name not in TASKS:
-        raise ValueError(f"unknown task {name!r}; tasks: {sorted(TASKS)}")
-    return list(inspect.signature(TASKS[name]).parameters)
+def task_options(kind: str) -> list[str]:
+    """The keyword options of the task registered as ``kind`` (its constructor's arguments)."""
+    if kind not in TASKS:
+        raise ValueError(f"unknown task {kind!r}; tasks: {sorted(TASKS)}")
+    return list(inspect.signature(TASKS[kind]).parameters)
 
 
-def make_task(name: str, **options) -> Task:
-    """A task by registry name, with keyword ``options`` (those of its constructor, see :func:`task_options`).
+def make_task(kind: str, /, **options) -> Task:
+    """A task by registry name ``kind``, with keyword ``options`` (those of its constructor, see
+    :func:`task_options`; ``name=`` names this task, default ``kind``).
 
     Raises ``ValueError`` for an unknown task, an unknown option (naming it and the valid ones) or a bad value,
     before any work.
 
     Example:
-        >>> make_task("goal_reaching", radius=1.5, num_goals=4).goals.norm(dim=-1).tolist()
-        [1.5, 1.5, 1.5, 1.5]
+        >>> task = make_task("goal_reaching", radius=1.5, num_goals=4, name="goal_reaching_1.5m")
+        >>> task.name, task.goals.norm(dim=-1).tolist()
+        ('goal_reaching_1.5m', [1.5, 1.5, 1.5, 1.5])
 
     ``make_task("goal_reaching", radus=2)`` raises ``ValueError: goal_reaching: unknown option 'radus'; valid
     options: radius, num_goals, num_steps, angle_offset, goals, name``.
     """
-    valid = task_options(name)
+    valid = task_options(kind)
     unknown = [key for key in options if key not in valid]
     if unknown:
         listed = ", ".join(repr(key) for key in unknown)
-        raise ValueError(f"{name}: unknown option{'s' if len(unknown) > 1 else ''} {listed}; valid options: "
+        raise ValueError(f"{kind}: unknown option{'s' if len(unknown) > 1 else ''} {listed}; valid options: "
                          f"{', '.join(valid)}")
-    return TASKS[name](**options)
+    return TASKS[kind](**options)
