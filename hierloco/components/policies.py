@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import abc
 
+import torch
 from tensordict import TensorDictBase
 from tensordict.nn import InteractionType, TensorDictModuleBase, set_interaction_type
 
@@ -39,6 +40,8 @@ class ActorPolicy(TensorDictModuleBase, TaskPolicy):
     Args:
         actor: reads ``actor.in_keys`` and writes ``actor.out_keys`` (the action).
         deterministic: act with the mode of the action distribution (no exploration), as for evaluation.
+
+    It acts without gradients (``torch.no_grad``).
     """
 
     def __init__(self, actor, *, deterministic: bool = True):
@@ -51,6 +54,7 @@ class ActorPolicy(TensorDictModuleBase, TaskPolicy):
     def begin_task(self, task) -> None:
         """Nothing to prepare: the goal comes with the observation."""
 
+    @torch.no_grad()
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
         with set_interaction_type(self.interaction):
             return self.actor(tensordict)
