@@ -1,4 +1,5 @@
-"""Simulation throughput (SPEC 10): the batched simulator against native ``mujoco.rollout`` and a TorchRL loop.
+"""Simulation throughput (``docs/index.md``, Performance): the batched simulator against native ``mujoco.rollout``
+and a TorchRL loop.
 
 All three run the same robot model, the same initial states and the same walking-like joint targets, and are
 measured in physics steps per second (5 physics steps per 100 Hz control step):
@@ -142,7 +143,7 @@ def benchmark_robot(robot: str | RobotSpec, num_robots: int = 64, control_steps:
 
 
 def format_table(rows: list[ThroughputRow], nthread: int) -> str:
-    """A plain-text table of the rows and the SPEC 10 ratios."""
+    """A plain-text table of the rows and the target ratios (``docs/index.md``, Performance)."""
     header = (f"{'robot':<8}{'B':>5}{'T':>5}{'batched':>12}{'native':>12}{'torchrl':>12}"
               f"{'batched/native':>17}{'batched/torchrl':>18}")
     lines = [f"physics steps per second (best of repeats), {nthread} thread(s); "

@@ -1,4 +1,5 @@
-"""hierloco's performance suite (SPEC 10): every number comes from this one run, as ratios on this machine.
+"""hierloco's performance suite (``docs/index.md``, Performance): every number comes from this one run, as ratios
+on this machine.
 
     ./run.sh bench                                  # A1 and Daisy, B = 64, best of 8
     ./run.sh bench --robots a1 --num-robots 32 --repeats 3

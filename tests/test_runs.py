@@ -1,4 +1,5 @@
-"""Run directories: stages cached with their config, mismatches refused, failures leave nothing behind (SPEC 9)."""
+"""Run directories: stages cached with their config, mismatches refused, failures leave nothing behind
+(``docs/index.md``, Runs and artifacts)."""
 
 import json
 

@@ -1,4 +1,5 @@
-"""The CoM dynamics model: a delta model in the robot's local frame over one latent action (SPEC 5.3).
+"""The CoM dynamics model: a delta model in the robot's local frame over one latent action (Li et al., RA-L 2021,
+Sec. III-C).
 
 The CoM state is ``(x, y, yaw, vx, vy)`` in the world frame (m, rad, m/s). Over one action ``a`` (a latent z, an
 expert index as a float or a velocity command: any ``A``-vector) the model predicts
@@ -11,9 +12,10 @@ a turn), and ``(vx', vy')`` the next velocity, still in the start frame. The pre
 position or heading, which makes it the same everywhere in the world. :func:`local_transition` turns world-frame
 state pairs into training pairs and :func:`apply_delta` turns a prediction back into a world-frame next state.
 
-The network is an MLP with 2 hidden layers of 512 ReLU units on standardised inputs predicting standardised outputs;
-the statistics are buffers, so the module maps physical units to physical units. :func:`train_com_model` fits it by
-MSE on the standardised outputs with Adam, holds out a seeded random 10 % and stops early on the held-out loss.
+The network is a :class:`torchrl.modules.MLP` with 2 hidden layers of 512 ReLU units on standardised inputs
+predicting standardised outputs; the statistics are buffers, so the module maps physical units to physical units.
+:func:`train_com_model` fits it by MSE on the standardised outputs with Adam, holds out a seeded random 10 % and
+stops early on the held-out loss.
 
 Example:
     >>> import torch
@@ -33,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 from torch import nn
+from torchrl.modules import MLP
 from tqdm.auto import tqdm
 
 from hierloco.envs.frames import local_to_world, world_to_local, wrap_angle
@@ -142,11 +145,8 @@ class CoMDynamicsModel(nn.Module):
             raise ValueError(f"hidden must be at least 1, got {hidden}")
         self.action_dim, self.hidden = int(action_dim), int(hidden)
         num_inputs = 2 + self.action_dim
-        self.net = nn.Sequential(
-            nn.Linear(num_inputs, self.hidden), nn.ReLU(),
-            nn.Linear(self.hidden, self.hidden), nn.ReLU(),
-            nn.Linear(self.hidden, 5),
-        )
+        self.net = MLP(in_features=num_inputs, out_features=5, num_cells=[self.hidden, self.hidden],
+                       activation_class=nn.ReLU)
         for name, value, size, default in [("input_mean", input_mean, num_inputs, 0.0),
                                            ("input_std", input_std, num_inputs, 1.0),
                                            ("output_mean", output_mean, 5, 0.0),

@@ -1,4 +1,5 @@
-"""CoM dynamics data: random high-level actions chained on B robots, collected with a TorchRL collector (SPEC 5.3).
+"""CoM dynamics data: random high-level actions chained on B robots, collected with a TorchRL collector (Li et al.,
+RA-L 2021, Sec. III-C and Algorithm 1).
 
 Each action is drawn uniformly from the low level's action space (the latent box for LAT, the expert indices for
 LIB, the command box for IK), held for one action (N control steps), and actions are chained; an episode is reset

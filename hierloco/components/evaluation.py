@@ -1,32 +1,47 @@
-"""Closed-loop MPC on the simulated robots: run a task's episodes with a planner and score them (SPEC 5.4, 6).
+"""Closed-loop evaluation on the simulated robots: run a task's episodes with a planner (or a learned policy) and
+score them (Li et al., RA-L 2021, Sec. III-A.2 for MPC, Sec. IV-A for the tasks and their costs).
 
 Every episode of the task runs on its own robot of a :class:`LatentActionEnv` (8 goals -> 8 robots in one batched
-simulation). At each task step the planner chooses an action from the measured state with the world model (or a
-learned policy acts), the robot executes it for one action (N control steps), and MPC re-plans from the new
-measured state. Episodes run their
-full length, so the cost covers every step; a robot that falls stays down, keeps paying the cost and is counted.
+simulation). At each task step the policy chooses an action from the measured state (a planner with its world
+model), the robot executes it for one action (N control steps), and MPC re-plans from the new measured state.
+Episodes run their full length, so the cost covers every step; a robot that falls stays down, keeps paying the cost
+and is counted (:class:`hierloco.envs.transforms.ContinueAfterFalls`).
 
 Example:
-    >>> # env: a LatentActionEnv(record=True); planner: e.g. RandomShootingPlanner(CoMWorldModelEnv(model, ...))
-    >>> # rollout = run_task(env, planner, GoalReaching())  # doctest: +SKIP
+    >>> import torch
+    >>> from hierloco.components.expert_library import build_expert_library
+    >>> from hierloco.components.low_level import ExpertReplayLowLevel
+    >>> from hierloco.components.planners import ExhaustivePlanner
+    >>> from hierloco.envs.tasks import GoalReaching
+    >>> from hierloco.envs.world_model import CoMWorldModelEnv
+    >>> library = build_expert_library("daisy", 3, progress=False)
+    >>> class Replay(torch.nn.Module):  # a stand-in CoM model: each expert moves by its recorded displacement
+    ...     def predict(self, com_state, action):
+    ...         moves = torch.as_tensor(library.com_states[:, -1, :2] - library.com_states[:, 0, :2]).float()
+    ...         return torch.cat([com_state[..., :2] + moves[action[..., 0].long()], com_state[..., 2:]], -1)
+    >>> planner = ExhaustivePlanner(CoMWorldModelEnv(Replay(), num_choices=3))
+    >>> env = LatentActionEnv(ExpertReplayLowLevel(library), num_robots=2, record=True)
+    >>> rollout = run_task(env, planner, GoalReaching(num_goals=2, num_steps=3))
+    >>> rollout.actions.shape, rollout.com_paths.shape, sorted(rollout.result.cost_terms)
+    ((2, 3, 1), (2, 300, 5), ['tracking', 'yaw'])
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
 import torch
 from torchrl.envs import Compose, TransformedEnv
-from torchrl.envs.utils import step_mdp
 from tqdm.auto import tqdm
 
+from hierloco.components.policies import TaskPolicy
 from hierloco.envs.latent_env import LatentActionEnv
 from hierloco.envs.robots import CONTROL_TIMESTEP
 from hierloco.envs.tasks import Task, TaskResult
-from hierloco.envs.transforms import TaskTransform
+from hierloco.envs.transforms import ContinueAfterFalls, task_transforms
 
 
 @dataclass
@@ -34,13 +49,15 @@ class TaskRollout:
     """What happened in a task's episodes.
 
     Attributes:
-        result: per-episode costs and metrics (:class:`TaskResult`).
+        result: per-episode costs, cost terms and metrics (:class:`TaskResult`).
         actions: ``E x T x A`` chosen actions.
         com_paths: ``E x (T * N) x 5`` CoM states at 100 Hz (when the env records), else ``None``.
         foot_contacts: ``E x (T * N) x L`` (when the env records), else ``None``.
         qpos: ``E x (T * N) x nq`` generalised positions at 100 Hz (when the env records), for videos.
         fell: ``E`` bool, whether the robot fell (or blew up) during the episode.
-        plan_seconds: mean wall-clock of one policy (planner) call.
+        plan_seconds: mean wall-clock of one policy (planner) call, s.
+        metrics: the task's per-episode extra metrics (:meth:`Task.extra_metrics`, each ``E``) over the 100 Hz CoM
+            paths, e.g. ``path_distance`` (m) for trajectory tracking; empty when the env does not record.
     """
 
     result: TaskResult
@@ -50,44 +67,62 @@ class TaskRollout:
     qpos: np.ndarray | None
     fell: np.ndarray
     plan_seconds: float
+    metrics: dict[str, np.ndarray] = field(default_factory=dict)
 
 
-def run_task(env: LatentActionEnv, policy, task: Task, episodes=None, transforms: Sequence = (),
+class _TimedPolicy:
+    """Calls ``policy``, adding its wall-clock to ``seconds`` and ticking the progress bar once per call."""
+
+    def __init__(self, policy, bar):
+        self.policy, self.bar, self.seconds = policy, bar, 0.0
+
+    def __call__(self, tensordict):
+        start = time.perf_counter()
+        out = self.policy(tensordict)
+        self.seconds += time.perf_counter() - start
+        self.bar.update(1)
+        return out
+
+
+def run_task(env: LatentActionEnv, policy, task: Task, *, episodes=None, transforms: Sequence = (),
              progress: bool = False) -> TaskRollout:
-    """Runs every episode of ``task`` on ``env``'s robots with ``policy``, one robot per episode (``episodes``:
-    which episode each robot runs).
+    """Runs every episode of ``task`` on ``env``'s robots with ``policy``, one robot per episode.
 
-    ``policy`` is an MPC planner (its world model env is re-targeted to ``task`` and its warm start reset) or any
-    TensorDict policy, e.g. a SAC actor; ``transforms`` go after the task transform (e.g. a goal observation)."""
+    Args:
+        env: the robots, one per episode (a :class:`LatentActionEnv`; ``record=True`` for the 100 Hz paths).
+        policy: a :class:`hierloco.components.policies.TaskPolicy` (an MPC planner, whose
+            :meth:`~hierloco.components.policies.TaskPolicy.begin_task` re-targets its world model to ``task`` and
+            resets its warm start; or an :class:`~hierloco.components.policies.ActorPolicy`); any other TensorDict
+            callable acts as it is.
+        task: the task; its episodes run their full ``task.num_steps`` steps (``env.rollout`` with
+            ``break_when_any_done=False``; a fallen robot is not reset).
+        episodes: which episode each robot runs (``B``, default ``b % task.num_episodes``).
+        transforms: go after the task transforms (e.g. a goal observation).
+        progress: a per-step progress bar.
+    """
     count = env.batch_size[0]
     episodes = torch.arange(count) % task.num_episodes if episodes is None else torch.as_tensor(episodes)
     if episodes.numel() != count:
         raise ValueError(f"{count} robots for {episodes.numel()} episodes")
-    if hasattr(getattr(policy, "env", None), "set_task"):
-        policy.env.set_task(task)
-    if hasattr(policy, "reset"):
-        policy.reset()
-    task_env = TransformedEnv(env, Compose(TaskTransform(task, episodes), *transforms))
-    td = task_env.reset()
-    steps, plan_time = [], 0.0
-    for _ in tqdm(range(task.num_steps), desc=task.name, disable=not progress, leave=False):
-        start = time.perf_counter()
-        td = policy(td)
-        plan_time += time.perf_counter() - start
-        td = task_env.step(td)
-        steps.append(td.exclude("next").update({"next": td.get("next")}).clone())
-        td = step_mdp(td)
-    rollout = torch.stack(steps, dim=1)  # E x T
+    if isinstance(policy, TaskPolicy):
+        policy.begin_task(task)
+    task_env = TransformedEnv(env, Compose(ContinueAfterFalls(), task_transforms(task, episodes), *transforms))
+    with tqdm(total=task.num_steps, desc=task.name, disable=not progress, leave=False) as bar:
+        timed = _TimedPolicy(policy, bar)
+        rollout = task_env.rollout(max_steps=task.num_steps, policy=timed, auto_reset=True,
+                                   break_when_any_done=False, trust_policy=True)  # E x T
     states = torch.cat([rollout["com_state"], rollout["next", "com_state"][:, -1:]], 1)
     result = task.evaluate(states, episodes)
     paths = contacts = qpos = None
+    metrics = {}
     if env.record:
         paths = rollout["next", "com_path"].flatten(1, 2).numpy()
         contacts = rollout["next", "foot_contacts"].flatten(1, 2).numpy()
         qpos = rollout["next", "qpos"].flatten(1, 2).numpy()
-    fell = rollout["next", "terminated"].squeeze(-1).any(1).numpy()
+        metrics = task.extra_metrics(paths)
+    fell = rollout["next", "fallen"].squeeze(-1).any(1).numpy()
     actions = rollout["action"].reshape(count, task.num_steps, -1).float().numpy()
-    return TaskRollout(result, actions, paths, contacts, qpos, fell, plan_time / task.num_steps)
+    return TaskRollout(result, actions, paths, contacts, qpos, fell, timed.seconds / task.num_steps, metrics)
 
 
 def latent_grid_paths(low_level, *, grid: int = 7, num_actions: int = 3, seed: int = 0):
@@ -107,7 +142,8 @@ def latent_grid_paths(low_level, *, grid: int = 7, num_actions: int = 3, seed: i
 
 def check_gait_policy(low_level, library, latents: np.ndarray, *, num_pairs: int = 50, num_actions: int = 4,
                       seed: int = 0) -> dict:
-    """How well ``pi(., z)`` reproduces and interpolates the experts, in simulation (SPEC 5.2).
+    """How well ``pi(., z)`` reproduces and interpolates the experts, in simulation (Li et al., RA-L 2021, Sec. III-B:
+    ``pi(., z_g)`` must match expert g; latents between experts give new, interpolating gaits).
 
     Runs ``pi(., z_g)`` open loop for every expert latent, and ``pi(., (z_a + z_b) / 2)`` for ``num_pairs`` random
     pairs, each for ``num_actions`` actions from standing, and measures the mean CoM velocity over the last

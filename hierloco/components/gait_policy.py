@@ -1,10 +1,11 @@
-"""The latent gait policy ``q_des = pi(t, z)`` and its joint training with one latent per expert (SPEC 5.2).
+"""The latent gait policy ``q_des = pi(t, z)`` and its joint training with one latent per expert (Li et al., RA-L
+2021, Sec. III-A.1 and III-B).
 
 ``t = n / N`` in (0, 1] is the phase within one latent action of N control steps. The policy sees only phase
 features and the latent z, never the robot state: for a fixed z it is a periodic open-loop joint-target pattern.
 Phase features are ``sin/cos(2 pi k m t)`` for harmonics ``k = 1..K`` of the gait frequency (``m`` gait periods
-per action). The network is an MLP with 2 hidden layers of 512 ReLU units whose output is de-normalised with the
-experts' per-joint mean and standard deviation.
+per action). The network is a :class:`torchrl.modules.MLP` with 2 hidden layers of 512 ReLU units whose output is
+de-normalised with the experts' per-joint mean and standard deviation.
 
 Training fits the policy and one learnable latent per expert together by MSE to the experts' joint targets; the
 latents have their own Adam optimiser with weight decay, which keeps the latent space compact.
@@ -27,6 +28,7 @@ import numpy as np
 import torch
 from tensordict.nn import TensorDictModule
 from torch import nn
+from torchrl.modules import MLP
 from tqdm.auto import tqdm
 
 from hierloco.io import load_checkpoint, save_checkpoint
@@ -57,11 +59,8 @@ class LatentGaitPolicy(nn.Module):
         nyquist = max(1, (self.steps_per_action // self.periods_per_action) // 2)
         self.num_harmonics = int(min(num_harmonics, nyquist))
         self.hidden = int(hidden)
-        self.net = nn.Sequential(
-            nn.Linear(2 * self.num_harmonics + self.latent_dim, hidden), nn.ReLU(),
-            nn.Linear(hidden, hidden), nn.ReLU(),
-            nn.Linear(hidden, self.num_joints),
-        )
+        self.net = MLP(in_features=2 * self.num_harmonics + self.latent_dim, out_features=self.num_joints,
+                       num_cells=[self.hidden, self.hidden], activation_class=nn.ReLU)
         self.register_buffer("joint_mean", torch.zeros(num_joints) if joint_mean is None else joint_mean.float())
         self.register_buffer("joint_std", torch.ones(num_joints) if joint_std is None else joint_std.float())
         frequencies = 2 * math.pi * self.periods_per_action * torch.arange(1, self.num_harmonics + 1)

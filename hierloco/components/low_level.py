@@ -1,8 +1,8 @@
 """Low levels: what turns one high-level action into N control steps of joint targets on the batched simulator.
 
-A low level has an action space (a box, or a finite set) and a ``run(sim, actions)`` that executes one action on
-every copy of a :class:`BatchedSimulator`. The latent-action environment, the CoM dynamics data and the planners
-work with any of them:
+A low level (:class:`hierloco.envs.low_level.LowLevel`, re-exported here) has an action space (a box, or a finite
+set) and a ``run(sim, actions)`` that executes one action on every copy of a :class:`BatchedSimulator`. The
+latent-action environment, the CoM dynamics data and the planners work with any of them:
 
 - :class:`LatentLowLevel` (LAT): the action is a latent z; all N targets come from ``pi(., z)`` in one forward pass.
 - :class:`ExpertReplayLowLevel` (LIB): the action is an expert index; the expert's recorded pattern is replayed.
@@ -27,52 +27,10 @@ import torch
 from hierloco.components.expert_library import ExpertLibrary
 from hierloco.components.experts import RaibertController, run_closed_loop
 from hierloco.components.gait_policy import TrainedGaitPolicy
-from hierloco.envs.batched_sim import BatchedSimulator, SimulationResult
+from hierloco.envs.low_level import LowLevel
 from hierloco.envs.robots import RobotSpec, get_robot
 
-
-class LowLevel:
-    """Base class: an action box ``action_low``/``action_high`` (``A``) and ``run``.
-
-    ``num_choices`` is ``None`` for a continuous box and the number of actions for a finite set (then the action is
-    a single index, ``A = 1``).
-    """
-
-    robot: RobotSpec
-    steps_per_action: int
-    action_low: np.ndarray
-    action_high: np.ndarray
-    num_choices: int | None = None
-    kind: str = "low_level"
-
-    @property
-    def action_dim(self) -> int:
-        return len(self.action_low)
-
-    def run(self, sim: BatchedSimulator, actions: np.ndarray) -> SimulationResult:
-        """Executes one action (``B x A``) on every copy of ``sim``; returns the ``B x N`` per-step result."""
-        raise NotImplementedError
-
-    def reset(self, mask: np.ndarray | None = None) -> None:
-        """Forgets any internal state for the copies in ``mask`` (default all); stateless low levels ignore it."""
-
-    def action_features(self, actions):
-        """The features a dynamics model sees for ``... x A`` actions (NumPy or torch): the actions themselves."""
-        return actions
-
-    def describe(self) -> dict:
-        """What identifies this low level (stored with the data collected on it)."""
-        return {"kind": self.kind, "robot": self.robot.name, "steps_per_action": self.steps_per_action,
-                "action_low": np.asarray(self.action_low).tolist(), "action_high": np.asarray(self.action_high).tolist(),
-                "num_choices": self.num_choices}
-
-    def _check(self, sim: BatchedSimulator, actions: np.ndarray) -> np.ndarray:
-        actions = np.asarray(actions, dtype=np.float64)
-        if actions.shape != (sim.num_robots, self.action_dim):
-            raise ValueError(f"actions must be B x A = {sim.num_robots} x {self.action_dim}, got {actions.shape}")
-        if not np.all(np.isfinite(actions)):
-            raise ValueError("actions contain NaN or inf")
-        return actions
+__all__ = ["CommandLowLevel", "ExpertReplayLowLevel", "LatentLowLevel", "LowLevel"]
 
 
 class LatentLowLevel(LowLevel):

@@ -1,14 +1,56 @@
 """Robots, the locomotion environments (dm_control and TorchRL), transforms, the batched simulator, the
-latent-action and world-model environments, the tasks and navigation arenas."""
+latent-action and world-model environments, the tasks and navigation arenas.
 
-from hierloco.envs.batched_sim import BatchedSimulator
+Importing it does not import :mod:`hierloco.components` (the low levels, models and planners that plug into these
+environments).
+"""
+
+from hierloco.envs.batched_sim import BatchedSimulator, SimulationResult, available_cores
 from hierloco.envs.latent_env import LatentActionEnv
+from hierloco.envs.locomotion import (
+    LocomotionEnv,
+    LocomotionPhysics,
+    LocomotionTask,
+    clamp_joint_targets,
+    joint_target_limits,
+    make_dm_env,
+    periods_per_action,
+    reset_joint_noise,
+    robot_has_fallen,
+)
+from hierloco.envs.low_level import LowLevel
+from hierloco.envs.navigation import Arena, clearance, cluttered_arena, plan_path
 from hierloco.envs.robots import Obstacle, RobotSpec, compile_model, get_robot, register_robot, robot_from_mjcf
-from hierloco.envs.tasks import GoalReaching, TrajectoryTracking, VelocityTracking, make_task
+from hierloco.envs.tasks import (
+    TASKS,
+    GoalReaching,
+    Task,
+    TaskResult,
+    TrajectoryTracking,
+    VelocityTracking,
+    make_task,
+    s_path,
+    task_options,
+)
 from hierloco.envs.torchrl_env import make_env
-from hierloco.envs.transforms import CoMState, DisableLegs, GoalObservation, TaskTransform
+from hierloco.envs.transforms import (
+    CoMState,
+    ContinueAfterFalls,
+    DisableLegs,
+    GoalObservation,
+    TaskEpisode,
+    TaskReward,
+    TaskTransform,
+    task_transforms,
+)
 from hierloco.envs.world_model import CoMWorldModelEnv
 
-__all__ = ["BatchedSimulator", "CoMState", "CoMWorldModelEnv", "DisableLegs", "GoalObservation", "GoalReaching",
-           "LatentActionEnv", "Obstacle", "RobotSpec", "TaskTransform", "TrajectoryTracking", "VelocityTracking",
-           "compile_model", "get_robot", "make_env", "make_task", "register_robot", "robot_from_mjcf"]
+__all__ = [
+    "TASKS", "Arena", "BatchedSimulator", "CoMState", "CoMWorldModelEnv", "ContinueAfterFalls", "DisableLegs",
+    "GoalObservation", "GoalReaching", "LatentActionEnv", "LocomotionEnv", "LocomotionPhysics", "LocomotionTask",
+    "LowLevel", "Obstacle", "RobotSpec", "SimulationResult", "Task", "TaskEpisode", "TaskResult", "TaskReward",
+    "TaskTransform", "TrajectoryTracking", "VelocityTracking", "available_cores", "clamp_joint_targets",
+    "clearance", "cluttered_arena", "compile_model", "get_robot", "joint_target_limits", "make_dm_env", "make_env",
+    "make_task", "periods_per_action", "plan_path", "register_robot", "reset_joint_noise", "robot_from_mjcf",
+    "robot_has_fallen", "s_path", "task_options", "task_transforms",
+]

@@ -25,7 +25,14 @@ import numpy as np
 from mujoco import rollout as mj_rollout
 
 from hierloco.envs.frames import com_state_from_base, quat_to_roll_pitch_yaw, world_to_local, yaw_rate_from_base
-from hierloco.envs.locomotion import FOOT_CONTACT_FORCE
+from hierloco.envs.locomotion import (
+    FOOT_CONTACT_FORCE,
+    check_joint_noise,
+    clamp_joint_targets,
+    joint_target_limits,
+    reset_joint_noise,
+    robot_has_fallen,
+)
 from hierloco.envs.robots import (
     PHYSICS_STEPS_PER_CONTROL,
     RobotSpec,
@@ -37,6 +44,14 @@ from hierloco.envs.robots import (
 )
 
 STATE_SPEC = mujoco.mjtState.mjSTATE_FULLPHYSICS
+
+
+def available_cores() -> int:
+    """The number of cores this process may run on (its CPU affinity, e.g. a Ray worker's share), else all cores."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):  # not on Linux
+        return os.cpu_count() or 1
 
 
 @dataclass
@@ -81,9 +96,13 @@ class BatchedSimulator:
         num_robots: B, the number of copies.
         disabled_legs: legs locked at their standing angles (their targets are ignored).
         obstacles: static boxes in the world (:class:`hierloco.envs.robots.Obstacle`), e.g. a navigation arena.
-        init_joint_noise: uniform noise in rad on the standing joint angles at reset.
+        init_joint_noise: uniform noise in rad on the standing joint angles at reset
+            (:func:`hierloco.envs.locomotion.reset_joint_noise`).
         seed: seeds the reset noise.
-        nthread: simulation threads (default: all cores).
+        nthread: simulation threads (default: the cores this process may use, :func:`available_cores`).
+
+    Joint targets outside the joint range are clamped to it (:func:`hierloco.envs.locomotion.clamp_joint_targets`,
+    as MuJoCo's control range would); NaN or infinite targets are refused.
     """
 
     def __init__(self, robot: str | RobotSpec, num_robots: int, *, disabled_legs: Sequence[str] = (),
@@ -94,10 +113,10 @@ class BatchedSimulator:
         self.robot = get_robot(robot)
         self.num_robots = int(num_robots)
         self.disabled_legs = tuple(disabled_legs)
-        self.init_joint_noise = float(init_joint_noise)
+        self.init_joint_noise = check_joint_noise(init_joint_noise)
         self.obstacles = tuple(obstacles)
         self.model = compile_model(self.robot, self.disabled_legs, self.obstacles)
-        self.nthread = int(nthread) if nthread is not None else (os.cpu_count() or 1)
+        self.nthread = int(nthread) if nthread is not None else available_cores()
         self._datas = [mujoco.MjData(self.model) for _ in range(max(1, self.nthread))]
         self._pool = mj_rollout.Rollout(nthread=self.nthread if self.nthread > 1 else 0)
         self._rng = np.random.default_rng(seed)
@@ -110,6 +129,7 @@ class BatchedSimulator:
         self._joint_qvel = joint_qvel_indices(self.model, self.robot)
         self._locked = self.robot.leg_joint_indices(self.disabled_legs)
         self._standing = np.asarray(self.robot.standing_pose, dtype=np.float64)
+        self._target_low, self._target_high = joint_target_limits(self.model)
         self.timestep = self.model.opt.timestep
 
         data = self._datas[0]
@@ -128,8 +148,7 @@ class BatchedSimulator:
         index = np.arange(self.num_robots) if mask is None else np.flatnonzero(np.asarray(mask, dtype=bool))
         self.state[index] = self._standing_state
         if self.init_joint_noise > 0 and len(index):
-            noise = self._rng.uniform(-self.init_joint_noise, self.init_joint_noise, (len(index), len(self._joint_qpos)))
-            noise[:, self._locked] = 0.0  # disabled legs start (and stay) at their standing angles
+            noise = reset_joint_noise(self._rng, self.init_joint_noise, len(index), len(self._joint_qpos), self._locked)
             self.state[np.ix_(index, 1 + self._joint_qpos)] += noise
         return self.com_state
 
@@ -171,8 +190,8 @@ class BatchedSimulator:
                              f"got shape {targets.shape}")
         if not np.all(np.isfinite(targets)):
             raise ValueError("joint_targets contain NaN or inf")
+        targets = clamp_joint_targets(targets, self._target_low, self._target_high)
         if len(self._locked):
-            targets = targets.copy()
             targets[..., self._locked] = self._standing[self._locked]
         num_steps = targets.shape[1]
         control = np.repeat(targets, PHYSICS_STEPS_PER_CONTROL, axis=1)
@@ -193,8 +212,7 @@ class BatchedSimulator:
         quat = qpos[..., 3:7]
         rpy = quat_to_roll_pitch_yaw(quat)
         robot = self.robot
-        down = (np.abs(rpy[..., 0]) > robot.max_roll) | (np.abs(rpy[..., 1]) > robot.max_pitch)
-        down |= qpos[..., 2] < robot.min_height
+        down = robot_has_fallen(robot, rpy[..., 0], rpy[..., 1], qpos[..., 2])
         fallen = np.logical_or.accumulate(down, axis=1)
         com_state = com_state_from_base(qpos[..., 0:3], quat, qvel[..., 0:3])
         return SimulationResult(

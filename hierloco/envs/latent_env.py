@@ -1,4 +1,5 @@
-"""The latent-action environment: a TorchRL env whose step is one whole high-level action on B robots (SPEC 5.2).
+"""The latent-action environment: a TorchRL env whose step is one whole high-level action on B robots (Li et al.,
+RA-L 2021, Sec. III-A: the high level acts at about 1 Hz, the low level at 100 Hz).
 
 For LAT the action is a latent z in the learned latent box and a step runs ``pi(., z)`` for N control steps (1 s)
 on every robot through the batched simulator; with another low level the action is an expert index (LIB) or a
@@ -16,7 +17,7 @@ Example:
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Sequence
+from typing import Sequence
 
 import numpy as np
 import torch
@@ -26,16 +27,15 @@ from torchrl.envs import EnvBase
 
 from hierloco.envs.batched_sim import BatchedSimulator
 from hierloco.envs.frames import world_to_local
-
-if TYPE_CHECKING:  # the env runs any low level; hierloco.envs does not import hierloco.components
-    from hierloco.components.low_level import LowLevel
+from hierloco.envs.low_level import LowLevel
 
 
 class LatentActionEnv(EnvBase):
     """B robots stepped one high-level action at a time.
 
     Args:
-        low_level: turns actions into joint targets (:mod:`hierloco.components.low_level`).
+        low_level: turns actions into joint targets, a :class:`hierloco.envs.low_level.LowLevel` (the latent gait
+            policy, expert replay and the Raibert controller are in :mod:`hierloco.components.low_level`).
         num_robots: B, the env's batch size.
         disabled_legs: legs locked at their standing angles (the adverse setting).
         init_joint_noise: rad of uniform noise on the standing joint angles at reset.
@@ -47,7 +47,7 @@ class LatentActionEnv(EnvBase):
         obstacles: static boxes in the world (a navigation arena).
     """
 
-    def __init__(self, low_level: "LowLevel", num_robots: int = 1, *, disabled_legs: Sequence[str] = (),
+    def __init__(self, low_level: LowLevel, num_robots: int = 1, *, disabled_legs: Sequence[str] = (),
                  init_joint_noise: float = 0.02, record: bool = False, seed: int | None = None,
                  nthread: int | None = None, obstacles: Sequence = (), device: str = "cpu"):
         super().__init__(batch_size=torch.Size([int(num_robots)]), device=device)

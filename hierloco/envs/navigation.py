@@ -1,4 +1,5 @@
-"""Navigation: a cluttered arena of boxes, a collision-free path from a grid planner, and clearance checks (SPEC 8).
+"""Navigation: a cluttered arena of boxes, a collision-free path from a grid planner, and clearance checks
+(``docs/index.md``, Navigation).
 
 The path is planned with A* on an occupancy grid whose obstacles are inflated by the robot's footprint radius,
 shortened by line-of-sight shortcuts and resampled evenly; a :class:`hierloco.envs.tasks.TrajectoryTracking` over

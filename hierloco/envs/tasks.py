@@ -1,4 +1,5 @@
-"""The locomotion tasks and their metric (SPEC 6): velocity tracking, goal reaching, trajectory tracking.
+"""The locomotion tasks and their metric (Li et al., RA-L 2021, Sec. IV-A): velocity tracking, goal reaching,
+trajectory tracking.
 
 A task is a set of episodes (one per target set: 8 goals, one velocity schedule, one path) of ``num_steps`` task
 steps; one task step is one high-level action (1 s). The robot starts at the origin facing +y and the yaw target is
@@ -9,8 +10,14 @@ a planner's ``B x S`` imagined transitions and a real transition (SAC's reward i
 - goal reaching ``c2 = w1 ||p_tgt - p|| + w2 |yaw_tgt - yaw|``, success within 0.2 m at the episode's end;
 - trajectory tracking: c2 with a reference point moving along an S-shaped path at constant speed.
 
-``[w1, w2] = [2, 1]``, yaw errors wrapped to (-pi, pi]. The headline metric is the normalised cost: the episode's mean
-per-step cost divided by that of a robot standing still at its start.
+``[w1, w2] = [2, 1]``, yaw errors wrapped to (-pi, pi]. Each cost is the sum of two named terms
+(:meth:`Task.cost_terms`): ``tracking`` (``w1`` times the velocity or position error) and ``yaw`` (``w2`` times the
+yaw error). The headline metric is the normalised cost: the episode's mean per-step cost divided by that of a robot
+standing still at its start.
+
+A task also says what callers draw and report: :meth:`Task.markers` (goals or reference points),
+:meth:`Task.extra_metrics` (e.g. the distance to the path) and :meth:`Task.training_split` (the half of the targets a
+model-free baseline trains on). Tasks are built by name with :func:`make_task`, which refuses unknown options.
 
 Example:
     >>> import torch
@@ -24,8 +31,10 @@ Example:
 
 from __future__ import annotations
 
+import inspect
 import math
-from dataclasses import dataclass
+import numbers
+from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
@@ -46,20 +55,60 @@ def _as_tensor(x, like=None):
     return torch.as_tensor(np.asarray(x), dtype=torch.float32 if like is None else like.dtype)
 
 
+def _number(name: str, value, *, positive: bool = False) -> float:
+    """``value`` as a finite float (``> 0`` with ``positive``), or a ``ValueError`` naming ``name``."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
+        raise ValueError(f"{name} must be a finite number, got {value!r}")
+    if positive and not value > 0:
+        raise ValueError(f"{name} must be positive, got {value!r}")
+    return float(value)
+
+
+def _whole(name: str, value, minimum: int) -> int:
+    """``value`` as an int ``>= minimum``, or a ``ValueError`` naming ``name`` (whole floats such as 5.0 pass)."""
+    whole = isinstance(value, numbers.Integral) or (isinstance(value, numbers.Real) and math.isfinite(value)
+                                                   and float(value).is_integer())
+    if isinstance(value, bool) or not whole or value < minimum:
+        raise ValueError(f"{name} must be a whole number >= {minimum}, got {value!r}")
+    return int(value)
+
+
+def _points(name: str, value, what: str, min_points: int = 1) -> np.ndarray:
+    """``value`` as a finite ``K x 2`` float64 array (``K >= min_points``), or a ``ValueError`` naming ``name``."""
+    try:
+        points = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a list of {what}, got {value!r}") from None
+    if points.ndim != 2 or points.shape[1] != 2 or len(points) < min_points:
+        raise ValueError(f"{name} must be a list of at least {min_points} {what}, got {value!r}")
+    if not np.isfinite(points).all():
+        raise ValueError(f"{name} must be finite {what}, got {value!r}")
+    return points
+
+
 class Task:
     """Base class of the tasks. Subclasses define ``target`` and ``_tracking_error``.
 
     Attributes:
-        name: registry name. num_episodes: target sets. num_steps: task steps per episode.
-        step_duration: seconds per task step.
+        kind: the registry name of the task's type (``"goal_reaching"``, ...).
+        name: this task's name (constructor keyword ``name``, default ``kind``), used in results and metric names.
+        num_episodes: target sets. num_steps: task steps per episode. step_duration: seconds per task step.
+        cost_term_names: the names of the cost terms, in order (``cost`` is their sum).
     """
 
-    name: str = "task"
+    kind: str = "task"
+    name: str = "task"  # replaced per instance by __init__
     num_episodes: int = 1
     num_steps: int = 1
     step_duration: float = STEP_DURATION
     start_yaw: float = START_YAW
     has_success: bool = True  # whether ``final_error <= 0.2`` means success
+    cost_term_names: tuple[str, ...] = ("tracking", "yaw")
+
+    def __init__(self, name: str | None = None):
+        if name is not None and (not isinstance(name, str) or not name):
+            raise ValueError(f"name must be a non-empty string, got {name!r}")
+        self.name = self.kind if name is None else name
 
     def target(self, episode: torch.Tensor, step: torch.Tensor) -> torch.Tensor:
         """``... x 2`` target (a velocity in m/s or a position in m, world frame) at task step ``step``."""
@@ -80,20 +129,44 @@ class Task:
             target = target - state[..., :2]
         return world_to_local(target, state[..., 2])
 
-    def cost(self, com_state, next_com_state, episode, step) -> torch.Tensor:
-        """Cost ``...`` of the transition ``com_state -> next_com_state`` (``... x 5`` world) that ends task step
-        ``step`` (0-based) of ``episode``; all arguments broadcast together."""
+    def cost_terms(self, com_state, next_com_state, episode, step) -> dict[str, torch.Tensor]:
+        """The named terms ``...`` of the cost of the transition ``com_state -> next_com_state`` (``... x 5`` world)
+        that ends task step ``step`` (0-based) of ``episode``; all arguments broadcast together.
+
+        ``tracking`` is ``w1`` times the task's error (m/s for velocity tracking, m otherwise), ``yaw`` is ``w2``
+        times the wrapped yaw error to the start yaw (rad).
+        """
         state, next_state = _as_tensor(com_state), _as_tensor(next_com_state)
         episode, step = torch.broadcast_tensors(_as_tensor(episode).long(), _as_tensor(step).long())
-        return self.cost_to_target(state, next_state, self.target(episode, step).to(next_state.dtype))
+        return self.cost_terms_to_target(state, next_state, self.target(episode, step).to(next_state.dtype))
+
+    def cost_terms_to_target(self, com_state: torch.Tensor, next_com_state: torch.Tensor,
+                             target: torch.Tensor) -> dict[str, torch.Tensor]:
+        """:meth:`cost_terms` against an explicit ``... x 2`` target of this task's kind (a velocity in m/s or a
+        position in m, world frame), for tensors ``... x 5``: usable where the target is an input (an exported
+        planner)."""
+        yaw_error = wrap_angle(self.start_yaw - next_com_state[..., 2]).abs()
+        return {"tracking": W_POSITION * self._tracking_error(com_state, next_com_state, target),
+                "yaw": W_YAW * yaw_error}
 
     def cost_to_target(self, com_state: torch.Tensor, next_com_state: torch.Tensor,
                        target: torch.Tensor) -> torch.Tensor:
-        """Cost ``...`` of ``com_state -> next_com_state`` (``... x 5`` world tensors) against an explicit ``... x 2``
-        target of this task's kind (a velocity in m/s or a position in m, world frame): what :meth:`cost` computes
-        for the target of a task step, usable where the target is an input (e.g. an exported planner)."""
-        yaw_error = wrap_angle(self.start_yaw - next_com_state[..., 2]).abs()
-        return W_POSITION * self._tracking_error(com_state, next_com_state, target) + W_YAW * yaw_error
+        """The cost ``...`` of :meth:`cost_terms_to_target` (the sum of its terms)."""
+        return self.total_cost(self.cost_terms_to_target(com_state, next_com_state, target))
+
+    @staticmethod
+    def total_cost(terms: dict[str, torch.Tensor]) -> torch.Tensor:
+        """The cost: the sum of the terms of :meth:`cost_terms`, in their order."""
+        values = iter(terms.values())
+        total = next(values)
+        for value in values:
+            total = total + value
+        return total
+
+    def cost(self, com_state, next_com_state, episode, step) -> torch.Tensor:
+        """Cost ``...`` of the transition ``com_state -> next_com_state`` (``... x 5`` world) that ends task step
+        ``step`` (0-based) of ``episode``: the sum of :meth:`cost_terms`; all arguments broadcast together."""
+        return self.total_cost(self.cost_terms(com_state, next_com_state, episode, step))
 
     def reward(self, tensordict: TensorDictBase, state_key="com_state", episode_key="task_episode",
                step_key="task_step") -> torch.Tensor:
@@ -129,13 +202,14 @@ class Task:
             raise ValueError(f"{self.name}: episodes must be {num} indices in [0, {self.num_episodes}), "
                              f"got {episodes.tolist()}")
         steps = torch.arange(self.num_steps)[None, :].expand(num, -1)
-        costs = self.cost(states[:, :-1], states[:, 1:], episodes[:, None], steps)
+        terms = self.cost_terms(states[:, :-1], states[:, 1:], episodes[:, None], steps)
+        costs = self.total_cost(terms)
         standing = self.standing_costs().double()[episodes]
         normalized = costs.mean(1) / standing.mean(1)
         final_error = self.final_error(states, episodes)
         success = (final_error <= SUCCESS_RADIUS).double() if self.has_success else torch.full_like(final_error, np.nan)
         return TaskResult(self.name, costs.numpy(), normalized.numpy(), final_error.numpy(), success.numpy(),
-                          states.numpy())
+                          states.numpy(), {term: value.mean(1).numpy() for term, value in terms.items()})
 
     def final_error(self, com_states: torch.Tensor, episodes: torch.Tensor) -> torch.Tensor:
         """``E`` task-specific error at the end of each episode (m, or m/s for velocity tracking)."""
@@ -143,11 +217,27 @@ class Task:
         episodes, last = torch.broadcast_tensors(episodes, last)
         return self._tracking_error(com_states[:, -2], com_states[:, -1], self.target(episodes, last).double())
 
+    def markers(self, episode: int | None = None) -> np.ndarray:
+        """``K x 2`` points to draw with the task (world frame, m): its goals or reference points; those of
+        ``episode`` alone when given. None for a velocity task (``0 x 2``)."""
+        return np.zeros((0, 2))
+
+    def extra_metrics(self, com_paths) -> dict[str, np.ndarray]:
+        """Task-specific per-episode metrics (each ``E``) from ``E x S x >=2`` world-frame CoM paths (m, e.g. the
+        100 Hz paths of :class:`hierloco.components.evaluation.TaskRollout`); none by default."""
+        return {}
+
+    def training_split(self) -> "Task":
+        """The same task on half of its targets, named ``<name>_train``: what a model-free baseline trains on before
+        it is tested on all of them (Li et al., RA-L 2021, Sec. IV-B). See each task for its rule."""
+        raise NotImplementedError(f"{self.name}: no training split for {type(self).__name__}")
+
 
 @dataclass
 class TaskResult:
     """Per-episode results: ``costs`` (``E x T``), ``normalized_cost``, ``final_error``, ``success`` (``E``, 1/0, NaN
-    for tasks without a success criterion)."""
+    for tasks without a success criterion), the ``E x (T + 1) x 5`` CoM states and ``cost_terms``: per term of
+    :meth:`Task.cost_terms`, its mean per step over each episode (``E``; they add up to ``costs.mean(1)``)."""
 
     task: str
     costs: np.ndarray
@@ -155,29 +245,36 @@ class TaskResult:
     final_error: np.ndarray
     success: np.ndarray
     com_states: np.ndarray
+    cost_terms: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 class VelocityTracking(Task):
     """Track world-frame CoM velocities: each target held ``steps_per_target`` steps, the schedule ``rounds`` times.
 
     Default: (0, 0.2), (0.2, 0), (0, -0.2), (-0.2, 0) m/s, 5 steps each, twice round (40 steps).
+
+    Training split: the first half of the schedule (``ceil(K / 2)`` targets; for the default (0, 0.2) and (0.2, 0),
+    one on each axis), repeated for at least as many steps as the whole task.
     """
 
-    name = "velocity_tracking"
+    kind = "velocity_tracking"
     has_success = False  # final_error is the velocity error of the last step (m/s)
     target_is_velocity = True
 
     def __init__(self, velocities: Sequence[Sequence[float]] = ((0.0, 0.2), (0.2, 0.0), (0.0, -0.2), (-0.2, 0.0)),
-                 steps_per_target: int = 5, rounds: int = 2):
-        self.velocities = torch.as_tensor(np.asarray(velocities, dtype=np.float32))
-        if self.velocities.ndim != 2 or self.velocities.shape[1] != 2 or not len(self.velocities):
-            raise ValueError(f"velocities must be a list of (vx, vy) pairs, got {velocities}")
-        if not torch.isfinite(self.velocities).all():
-            raise ValueError(f"velocities must be finite m/s, got {velocities}")
-        if steps_per_target < 1 or rounds < 1:
-            raise ValueError("steps_per_target and rounds must be positive")
-        self.steps_per_target = int(steps_per_target)
-        self.num_steps = len(self.velocities) * self.steps_per_target * int(rounds)
+                 steps_per_target: int = 5, rounds: int = 2, name: str | None = None):
+        super().__init__(name)
+        points = _points("velocities", velocities, "(vx, vy) pairs in m/s")
+        self.velocities = torch.as_tensor(points.astype(np.float32))
+        self.steps_per_target = _whole("steps_per_target", steps_per_target, 1)
+        self.rounds = _whole("rounds", rounds, 1)
+        self.num_steps = len(self.velocities) * self.steps_per_target * self.rounds
+
+    def training_split(self) -> "VelocityTracking":
+        half = self.velocities[: (len(self.velocities) + 1) // 2]
+        rounds = math.ceil(self.num_steps / (len(half) * self.steps_per_target))
+        return VelocityTracking(velocities=half.numpy(), steps_per_target=self.steps_per_target, rounds=rounds,
+                                name=f"{self.name}_train")
 
     def target(self, episode, step):
         index = (step // self.steps_per_target) % len(self.velocities)
@@ -191,30 +288,38 @@ class VelocityTracking(Task):
 class GoalReaching(Task):
     """Reach goals evenly spread on a circle around the start, one episode of ``num_steps`` per goal.
 
-    Default: 8 goals on a 2 m circle at 0, 45, ..., 315 deg, 30 steps each.
+    Default: 8 goals on a 2 m circle at 0, 45, ..., 315 deg (``angle_offset`` rad turns them), 30 steps each;
+    ``goals`` (``K x 2``, m) replaces the circle.
+
+    Training split: every other goal (0, 2, 4, ...; for the default 8 goals those on the x and y axes).
     """
 
-    name = "goal_reaching"
+    kind = "goal_reaching"
 
     def __init__(self, radius: float = 2.0, num_goals: int = 8, num_steps: int = 30, angle_offset: float = 0.0,
-                 goals: Sequence[Sequence[float]] | None = None):
+                 goals: Sequence[Sequence[float]] | None = None, name: str | None = None):
+        super().__init__(name)
         if goals is None:
-            if not (math.isfinite(radius) and radius > 0) or num_goals < 1:
-                raise ValueError(f"need radius > 0 and num_goals >= 1, got {radius}, {num_goals}")
+            radius = _number("radius", radius, positive=True)
+            num_goals = _whole("num_goals", num_goals, 1)
+            angle_offset = _number("angle_offset", angle_offset)
             angles = angle_offset + 2 * math.pi * torch.arange(num_goals) / num_goals
             goals = torch.stack([radius * torch.cos(angles), radius * torch.sin(angles)], -1)
-        self.goals = torch.as_tensor(np.asarray(goals, dtype=np.float32))
-        if self.goals.ndim != 2 or self.goals.shape[1] != 2:
-            raise ValueError(f"goals must be a list of (x, y) positions, got {goals}")
-        if not torch.isfinite(self.goals).all():
-            raise ValueError(f"goals must be finite positions (m), got {goals}")
-        if num_steps < 1:
-            raise ValueError("num_steps must be positive")
+        points = _points("goals", goals, "(x, y) positions in m")
+        self.goals = torch.as_tensor(points.astype(np.float32))
         self.num_episodes = len(self.goals)
-        self.num_steps = int(num_steps)
+        self.num_steps = _whole("num_steps", num_steps, 1)
 
     def target(self, episode, step):
         return self.goals.to(episode.device)[episode]
+
+    def markers(self, episode: int | None = None) -> np.ndarray:
+        """The goals ``K x 2`` (m), or goal ``episode`` alone (``1 x 2``)."""
+        goals = self.goals.numpy().astype(np.float64)
+        return goals if episode is None else goals[int(episode)][None]
+
+    def training_split(self) -> "GoalReaching":
+        return GoalReaching(goals=self.goals[::2].numpy(), num_steps=self.num_steps, name=f"{self.name}_train")
 
     def _tracking_error(self, state, next_state, target):
         return torch.linalg.vector_norm(target - next_state[..., :2], dim=-1)
@@ -233,28 +338,29 @@ class TrajectoryTracking(Task):
     """Follow a reference point moving along ``path`` (default the S path) at ``speed`` m/s.
 
     The episode lasts until the reference reaches the end of the path, plus ``extra_steps``. ``final_error`` is the
-    distance to the end of the path; :meth:`path_distance` gives the mean distance from the CoM to the path.
+    distance to the end of the path; :meth:`path_distance` gives the distance from the CoM to the path, reported per
+    episode by :meth:`extra_metrics` as ``path_distance`` (the mean over the CoM path, m).
+
+    Training split: the first half of the path's points, at the same speed, with the same ``extra_steps``.
     """
 
-    name = "trajectory_tracking"
+    kind = "trajectory_tracking"
 
-    def __init__(self, path: np.ndarray | None = None, speed: float = 0.1, extra_steps: int = 10):
-        points = s_path() if path is None else np.asarray(path, dtype=np.float64)
-        if points.ndim != 2 or points.shape[1] != 2 or len(points) < 2:
-            raise ValueError("path must be a P x 2 array of points, P >= 2")
-        if not np.isfinite(points).all() or not np.linalg.norm(np.diff(points, axis=0), axis=1).sum() > 0:
+    def __init__(self, path: np.ndarray | None = None, speed: float = 0.1, extra_steps: int = 10,
+                 name: str | None = None):
+        super().__init__(name)
+        points = s_path() if path is None else _points("path", path, "(x, y) points in m", min_points=2)
+        if not np.linalg.norm(np.diff(points, axis=0), axis=1).sum() > 0:
             raise ValueError("path must be finite points (m) with a positive length")
-        if not (math.isfinite(speed) and speed > 0):
-            raise ValueError(f"speed must be positive m/s, got {speed}")
-        if int(extra_steps) < 0:
-            raise ValueError(f"extra_steps must be >= 0, got {extra_steps}")
+        speed = _number("speed", speed, positive=True)
+        self.extra_steps = _whole("extra_steps", extra_steps, 0)
         self.path = torch.as_tensor(points, dtype=torch.float32)
         self.arc_length = torch.as_tensor(np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0),
                                                                                           axis=1))]),
                                           dtype=torch.float32)
         self.length = float(self.arc_length[-1])
         self.speed = float(speed)
-        self.num_steps = int(math.ceil(self.length / (self.speed * self.step_duration))) + int(extra_steps)
+        self.num_steps = int(math.ceil(self.length / (self.speed * self.step_duration))) + self.extra_steps
         times = (torch.arange(self.num_steps) + 1) * self.step_duration
         self.references = self.point_at(torch.clamp(self.speed * times, max=self.length))  # T x 2
 
@@ -281,13 +387,50 @@ class TrajectoryTracking(Task):
         dense = self.point_at(torch.linspace(0, self.length, 4000)).double()
         return torch.cdist(positions.reshape(-1, 2), dense).min(-1).values.reshape(positions.shape[:-1]).numpy()
 
+    def markers(self, episode: int | None = None) -> np.ndarray:
+        """The reference points ``T x 2`` (m), one per task step, along the path (the same for every episode)."""
+        return self.references.numpy().astype(np.float64)
+
+    def extra_metrics(self, com_paths) -> dict[str, np.ndarray]:
+        """``path_distance``: per episode, the mean distance (m) from the CoM (``E x S x >=2`` paths) to the path."""
+        return {"path_distance": self.path_distance(np.asarray(com_paths)[..., :2]).mean(1)}
+
+    def training_split(self) -> "TrajectoryTracking":
+        path = self.path.numpy()
+        return TrajectoryTracking(path=path[: len(path) // 2 + 1], speed=self.speed, extra_steps=self.extra_steps,
+                                  name=f"{self.name}_train")
+
 
 TASKS = {"velocity_tracking": VelocityTracking, "goal_reaching": GoalReaching,
          "trajectory_tracking": TrajectoryTracking}
 
 
-def make_task(name: str, **kwargs) -> Task:
-    """A task by registry name, with keyword overrides."""
-    if name not in TASKS:
-        raise ValueError(f"unknown task {name!r}; tasks: {sorted(TASKS)}")
-    return TASKS[name](**kwargs)
+def task_options(kind: str) -> list[str]:
+    """The keyword options of the task registered as ``kind`` (its constructor's arguments)."""
+    if kind not in TASKS:
+        raise ValueError(f"unknown task {kind!r}; tasks: {sorted(TASKS)}")
+    return list(inspect.signature(TASKS[kind]).parameters)
+
+
+def make_task(kind: str, /, **options) -> Task:
+    """A task by registry name ``kind``, with keyword ``options`` (those of its constructor, see
+    :func:`task_options`; ``name=`` names this task, default ``kind``).
+
+    Raises ``ValueError`` for an unknown task, an unknown option (naming it and the valid ones) or a bad value,
+    before any work.
+
+    Example:
+        >>> task = make_task("goal_reaching", radius=1.5, num_goals=4, name="goal_reaching_1.5m")
+        >>> task.name, task.goals.norm(dim=-1).tolist()
+        ('goal_reaching_1.5m', [1.5, 1.5, 1.5, 1.5])
+
+    ``make_task("goal_reaching", radus=2)`` raises ``ValueError: goal_reaching: unknown option 'radus'; valid
+    options: radius, num_goals, num_steps, angle_offset, goals, name``.
+    """
+    valid = task_options(kind)
+    unknown = [key for key in options if key not in valid]
+    if unknown:
+        listed = ", ".join(repr(key) for key in unknown)
+        raise ValueError(f"{kind}: unknown option{'s' if len(unknown) > 1 else ''} {listed}; valid options: "
+                         f"{', '.join(valid)}")
+    return TASKS[kind](**options)

@@ -1,4 +1,4 @@
-"""``make_env``: the TorchRL locomotion environment of a robot (SPEC 4).
+"""``make_env``: the TorchRL locomotion environment of a robot at 100 Hz (Li et al., RA-L 2021, Sec. III-A).
 
 Example:
     >>> from hierloco.envs import make_env
@@ -12,9 +12,8 @@ from __future__ import annotations
 from typing import Sequence
 
 from torchrl.envs import Compose, DoubleToFloat, TransformedEnv
-from torchrl.envs.libs.dm_control import DMControlWrapper
 
-from hierloco.envs.locomotion import INIT_JOINT_NOISE, make_dm_env
+from hierloco.envs.locomotion import INIT_JOINT_NOISE, LocomotionEnv, make_dm_env
 from hierloco.envs.robots import RobotSpec, get_robot
 from hierloco.envs.transforms import CoMState, DisableLegs
 
@@ -32,11 +31,16 @@ def make_env(
 
     The action is the joint-target vector (rad, ``robot.joint_names`` order); observations are float32 and
     include ``com_state`` (``x, y, yaw, vx, vy``, world frame) and ``com_velocity_local``. ``disabled_legs`` adds a
-    :class:`DisableLegs` transform. A fall sets ``terminated``, the time limit (s) ``truncated``.
+    :class:`DisableLegs` transform. A fall sets ``terminated``, the time limit (s) ``truncated``; the base env is a
+    :class:`hierloco.envs.locomotion.LocomotionEnv` (``env.base_env.physics`` is the dm_control Physics).
+
+    Joint targets outside the joint range are clamped to it, as in the batched simulator. A NaN target ends the step
+    as terminated with reward 0 (the previous targets are held for that step) and warns; an infinite target raises
+    ``ValueError`` (the batched simulator refuses both).
     """
     robot = get_robot(robot)
     robot.leg_joint_indices(disabled_legs)  # names checked before any work
-    base = DMControlWrapper(make_dm_env(robot, disabled_legs=disabled_legs, time_limit=time_limit,
+    base = LocomotionEnv(make_dm_env(robot, disabled_legs=disabled_legs, time_limit=time_limit,
                                         init_joint_noise=init_joint_noise), device=device)
     transforms = [DoubleToFloat(), CoMState()]
     if disabled_legs:

@@ -1,4 +1,6 @@
-"""TorchRL transforms for legged locomotion: the CoM state and disabled legs.
+"""TorchRL transforms for legged locomotion: the CoM state, disabled legs, and running a task on a high-level env
+(:func:`task_transforms`: its episode index, step counter and reward) with the goal observation of a
+goal-conditioned policy.
 
 Example:
     >>> from hierloco.envs import make_env
@@ -14,10 +16,11 @@ from typing import Sequence
 
 import torch
 from tensordict import TensorDictBase
-from torchrl.data import Composite, Unbounded
-from torchrl.envs.transforms import Transform
+from torchrl.data import Categorical, Composite, Unbounded
+from torchrl.envs.transforms import Compose, StepCounter, Transform
 
 from hierloco.envs.frames import world_to_local
+from hierloco.envs.locomotion import LocomotionEnv
 from hierloco.envs.robots import LOCK_PREFIX, RobotSpec, get_robot
 
 
@@ -53,7 +56,8 @@ class CoMState(Transform):
 
 
 class DisableLegs(Transform):
-    """Disables legs (the adverse setting of SPEC 7): their joints are held at their standing angles.
+    """Disables legs (the adverse setting of Li et al., RA-L 2021, Sec. IV-C): their joints are held at their standing
+    angles.
 
     On the action side, the targets of the disabled joints are replaced by their standing angles, whatever the
     policy outputs. On reset, the joints are locked in the physics (a MuJoCo joint equality constraint), so they
@@ -89,30 +93,27 @@ class DisableLegs(Transform):
 
     def _physics(self):
         env = self.parent.base_env if self.parent is not None else None
-        physics = getattr(getattr(env, "_env", None), "physics", None)
-        if physics is None:
-            raise RuntimeError("DisableLegs must sit on an env made by hierloco.envs.make_env (a dm_control env)")
-        return physics
+        if not isinstance(env, LocomotionEnv):
+            raise RuntimeError("DisableLegs must sit on an env made by hierloco.envs.make_env (a LocomotionEnv), "
+                               f"got {type(env).__name__}")
+        return env.physics
 
 
-class TaskTransform(Transform):
-    """Runs a task on a high-level env: task state in the observations, ``-cost`` as the reward, a time limit.
+class TaskEpisode(Transform):
+    """Which target set (episode of ``task``) each robot pursues: ``task_episode`` (``B x 1``, int64), constant.
 
-    Adds ``task_episode`` (which target set each robot pursues, ``B x 1``) and ``task_step`` (``B x 1``, the
-    number of task steps done), sets the reward of each transition to ``-task.cost`` and truncates the episode after
-    ``task.num_steps`` steps. On :class:`hierloco.envs.latent_env.LatentActionEnv` with ``B`` robots, robot ``b``
-    pursues episode ``episodes[b]`` (default ``b % task.num_episodes``).
+    On :class:`hierloco.envs.latent_env.LatentActionEnv` with ``B`` robots, robot ``b`` pursues episode
+    ``episodes[b]`` (default ``b % task.num_episodes``). Part of :func:`task_transforms`.
 
     Args:
         task: a :class:`hierloco.envs.tasks.Task`.
         episodes: ``B`` episode indices, or ``None``.
-        state_key: the world-frame CoM state key.
+        out_key: where the episode index is written.
     """
 
-    def __init__(self, task, episodes: Sequence[int] | None = None, state_key: str = "com_state"):
-        super().__init__(in_keys=[state_key], out_keys=["task_episode", "task_step"])
+    def __init__(self, task, episodes: Sequence[int] | None = None, out_key: str = "task_episode"):
+        super().__init__(in_keys=[], out_keys=[out_key])
         self.task = task
-        self.state_key = state_key
         self.episodes = None if episodes is None else torch.as_tensor(episodes, dtype=torch.int64)
 
     def _episode_index(self, batch: torch.Size) -> torch.Tensor:
@@ -124,30 +125,129 @@ class TaskTransform(Transform):
         return episodes.reshape(*batch, 1)
 
     def _reset(self, tensordict: TensorDictBase, tensordict_reset: TensorDictBase) -> TensorDictBase:
-        batch = tensordict_reset.batch_size
-        tensordict_reset.set("task_episode", self._episode_index(batch).to(tensordict_reset.device))
-        step = torch.zeros((*batch, 1), dtype=torch.int64, device=tensordict_reset.device)
-        if "_reset" in tensordict.keys() and "task_step" in tensordict.keys():
-            step = torch.where(tensordict.get("_reset"), step, tensordict.get("task_step"))
-        tensordict_reset.set("task_step", step)
+        tensordict_reset.set(self.out_keys[0], self._episode_index(tensordict_reset.batch_size).to(
+            tensordict_reset.device))
         return tensordict_reset
 
     def _step(self, tensordict: TensorDictBase, next_tensordict: TensorDictBase) -> TensorDictBase:
-        episode, step = tensordict.get("task_episode"), tensordict.get("task_step")
-        cost = self.task.cost(tensordict.get(self.state_key), next_tensordict.get(self.state_key),
-                              episode.squeeze(-1), step.squeeze(-1))
-        next_tensordict.set("reward", -cost.unsqueeze(-1).to(next_tensordict.get("reward").dtype))
-        next_tensordict.set("task_episode", episode)
-        next_tensordict.set("task_step", step + 1)
-        over = step + 1 >= self.task.num_steps
-        next_tensordict.set("truncated", next_tensordict.get("truncated") | over)
-        next_tensordict.set("done", next_tensordict.get("done") | over)
+        next_tensordict.set(self.out_keys[0], tensordict.get(self.out_keys[0]))
         return next_tensordict
 
     def transform_observation_spec(self, observation_spec: Composite) -> Composite:
-        batch = observation_spec.shape
-        for key in ("task_episode", "task_step"):
-            observation_spec[key] = Unbounded((*batch, 1), dtype=torch.int64, device=observation_spec.device)
+        observation_spec[self.out_keys[0]] = Unbounded((*observation_spec.shape, 1), dtype=torch.int64,
+                                                       device=observation_spec.device)
+        return observation_spec
+
+
+class TaskReward(Transform):
+    """The reward of a task: ``-task.cost`` of each transition, and its named terms (Li et al., RA-L 2021, Sec. IV-A).
+
+    Reads the world-frame CoM state before and after the transition (``state_key``), ``task_episode`` and
+    ``task_step`` (the task step the transition ends, 0-based, before the step counter advances). Writes
+    ``reward`` (``B x 1``) and, per term of :meth:`hierloco.envs.tasks.Task.cost_terms`, ``cost_<term>``
+    (``B x 1``, the term of the last transition, 0 after a reset). Part of :func:`task_transforms`.
+
+    Args:
+        task: a :class:`hierloco.envs.tasks.Task`.
+        state_key, episode_key, step_key: the keys it reads.
+    """
+
+    def __init__(self, task, state_key: str = "com_state", episode_key: str = "task_episode",
+                 step_key: str = "task_step"):
+        self.term_keys = [f"cost_{term}" for term in task.cost_term_names]
+        super().__init__(in_keys=[state_key, episode_key, step_key], out_keys=["reward", *self.term_keys])
+        self.task = task
+
+    def _step(self, tensordict: TensorDictBase, next_tensordict: TensorDictBase) -> TensorDictBase:
+        state_key, episode_key, step_key = self.in_keys
+        terms = self.task.cost_terms(tensordict.get(state_key), next_tensordict.get(state_key),
+                                     tensordict.get(episode_key).squeeze(-1), tensordict.get(step_key).squeeze(-1))
+        dtype = next_tensordict.get("reward").dtype
+        next_tensordict.set("reward", -self.task.total_cost(terms).unsqueeze(-1).to(dtype))
+        for key, value in zip(self.term_keys, terms.values()):
+            next_tensordict.set(key, value.unsqueeze(-1).to(dtype))
+        return next_tensordict
+
+    def _reset(self, tensordict: TensorDictBase, tensordict_reset: TensorDictBase) -> TensorDictBase:
+        dtype = self.parent.full_reward_spec["reward"].dtype
+        for key in self.term_keys:
+            tensordict_reset.set(key, torch.zeros((*tensordict_reset.batch_size, 1), dtype=dtype,
+                                                  device=tensordict_reset.device))
+        return tensordict_reset
+
+    def transform_output_spec(self, output_spec: Composite) -> Composite:
+        output_spec = output_spec.clone()
+        reward = output_spec["full_reward_spec", "reward"]
+        for key in self.term_keys:  # per-transition values like the reward, kept with the observations
+            output_spec["full_observation_spec", key] = Unbounded(reward.shape, dtype=reward.dtype,
+                                                                  device=reward.device)
+        return super().transform_output_spec(output_spec)
+
+
+def task_transforms(task, episodes: Sequence[int] | None = None, *, state_key: str = "com_state") -> Compose:
+    """Runs ``task`` on a high-level env (one step per task step): its task state, its reward and its time limit.
+
+    ``Compose(TaskEpisode(task, episodes), StepCounter(task.num_steps, step_count_key="task_step"),
+    TaskReward(task))``: ``task_episode`` says which target set each robot pursues, ``task_step`` counts the task
+    steps done (TorchRL's :class:`~torchrl.envs.transforms.StepCounter`: 0 at a reset, kept across a partial reset
+    for the robots not reset, and ``truncated``/``done`` set once it reaches ``task.num_steps``), ``reward`` is
+    ``-task.cost``.
+
+    Example:
+        >>> from torchrl.envs import TransformedEnv
+        >>> from hierloco.components.expert_library import build_expert_library
+        >>> from hierloco.components.low_level import ExpertReplayLowLevel
+        >>> from hierloco.envs.latent_env import LatentActionEnv
+        >>> from hierloco.envs.tasks import GoalReaching
+        >>> task = GoalReaching(num_goals=2, num_steps=3)
+        >>> low = ExpertReplayLowLevel(build_expert_library("daisy", 3, progress=False))
+        >>> env = TransformedEnv(LatentActionEnv(low, num_robots=2), task_transforms(task))
+        >>> td = env.rollout(5, break_when_any_done=False)
+        >>> td["next", "task_step"].squeeze(-1).tolist(), td["next", "truncated"][0].squeeze(-1).tolist()
+        ([[1, 2, 3, 1, 2], [1, 2, 3, 1, 2]], [False, False, True, False, False])
+    """
+    return Compose(TaskEpisode(task, episodes), StepCounter(max_steps=task.num_steps, step_count_key="task_step"),
+                   TaskReward(task, state_key=state_key))
+
+
+def TaskTransform(task, episodes: Sequence[int] | None = None, state_key: str = "com_state") -> Compose:  # noqa: N802
+    """Deprecated name of :func:`task_transforms`, kept for existing callers."""
+    return task_transforms(task, episodes, state_key=state_key)
+
+
+class ContinueAfterFalls(Transform):
+    """Evaluation episodes that run their full length: a robot that falls (or whose physics blows up) is not reset
+    but keeps being simulated and scored, and the fall is recorded instead of ending its episode.
+
+    Moves the base env's ``terminated`` into ``fallen`` (``B x 1`` bool, true from the step the robot failed until
+    the next reset) and clears ``terminated`` (``done`` keeps only the truncation), so that
+    ``env.rollout(..., break_when_any_done=False)`` never resets a fallen robot mid-episode. Sits first, right on
+    the base env. Not for training: a collector would never reset a fallen robot.
+
+    Args:
+        out_key: where the fall flag is written.
+    """
+
+    def __init__(self, out_key: str = "fallen"):
+        super().__init__(in_keys=["terminated"], out_keys=[out_key])
+
+    def _reset(self, tensordict: TensorDictBase, tensordict_reset: TensorDictBase) -> TensorDictBase:
+        fallen = torch.zeros((*tensordict_reset.batch_size, 1), dtype=torch.bool, device=tensordict_reset.device)
+        if tensordict is not None and "_reset" in tensordict.keys() and self.out_keys[0] in tensordict.keys():
+            fallen = tensordict.get(self.out_keys[0]) & ~tensordict.get("_reset")
+        tensordict_reset.set(self.out_keys[0], fallen)
+        return tensordict_reset
+
+    def _step(self, tensordict: TensorDictBase, next_tensordict: TensorDictBase) -> TensorDictBase:
+        terminated = next_tensordict.get("terminated")
+        next_tensordict.set(self.out_keys[0], tensordict.get(self.out_keys[0]) | terminated)
+        next_tensordict.set("terminated", torch.zeros_like(terminated))
+        next_tensordict.set("done", next_tensordict.get("truncated").clone())
+        return next_tensordict
+
+    def transform_observation_spec(self, observation_spec: Composite) -> Composite:
+        observation_spec[self.out_keys[0]] = Categorical(2, (*observation_spec.shape, 1), dtype=torch.bool,
+                                                         device=observation_spec.device)
         return observation_spec
 
 
@@ -157,7 +257,7 @@ class GoalObservation(Transform):
     Writes ``goal_observation`` (``... x 7``): the task's target in the robot's local frame
     (:meth:`hierloco.envs.tasks.Task.relative_target`, ``2``), the CoM velocity in the local frame (``2``), the sine
     and cosine of the yaw error to the task's yaw target (``2``) and the fraction of the episode done (``1``).
-    Sits after a :class:`TaskTransform` of the same task.
+    Sits after the :func:`task_transforms` of the same task.
     """
 
     SIZE = 7

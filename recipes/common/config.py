@@ -7,7 +7,6 @@ config: the library takes keyword arguments.
 
 from __future__ import annotations
 
-import inspect
 import math
 from typing import Any, Callable, Iterable
 
@@ -88,31 +87,17 @@ class Checker:
 def make_task_from_spec(name: str, spec: dict):
     """The task ``name`` of the ``eval`` section: ``spec`` holds its type (``task``, default the name) and options.
 
-    Unknown options and bad values raise :class:`ConfigError` naming the option and the valid ones."""
-    from hierloco.envs.tasks import TASKS
+    Unknown options and bad values raise :class:`ConfigError` naming the task, the option and the valid ones."""
+    from hierloco.envs.tasks import TASKS, make_task
 
     options = dict(spec or {})
     kind = options.pop("task", name)
     if kind not in TASKS:
         raise ConfigError(f"bad config: unknown task {kind!r} for eval task {name!r} (tasks: {', '.join(TASKS)})")
-    cls = TASKS[kind]
-    parameters = {p: v for p, v in inspect.signature(cls.__init__).parameters.items() if p not in ("self", "name")}
-    accepted = list(parameters)
-    unknown = sorted(set(options) - set(accepted))
-    if unknown:
-        raise ConfigError(f"bad config: eval task {name!r} ({kind}) has no option {', '.join(map(repr, unknown))} "
-                          f"(its options: {', '.join(accepted)})")
-    for option, value in options.items():
-        default = parameters[option].default
-        if _is_number(default) and not _is_number(value):
-            raise ConfigError(f"bad config: eval task {name!r} ({kind}): option {option!r} must be a finite number, "
-                              f"got {value!r}")
     try:
-        task = cls(**options)
+        return make_task(kind, **{"name": name, **options})
     except (TypeError, ValueError) as error:
-        raise ConfigError(f"bad config: eval task {name!r} ({kind}): {error}") from None
-    task.name = name
-    return task
+        raise ConfigError(f"bad config: eval task {name!r}: {error}") from None
 
 
 # ---------------------------------------------------------------------------------------------------- recipes
@@ -155,12 +140,12 @@ def check_experts(c: Checker, robot, *, library: bool = True) -> None:
     c.integer("steps_per_action")
     steps = get(c.cfg, "steps_per_action")
     if robot is not None and _is_int(steps) and steps >= 1:
-        from hierloco.envs.robots import CONTROL_TIMESTEP
+        from hierloco.envs.locomotion import periods_per_action
 
-        periods = steps * CONTROL_TIMESTEP / robot.gait_period
-        if abs(periods - round(periods)) > 1e-6 or round(periods) < 1:
-            c.fail(f"steps_per_action={steps} ({steps * CONTROL_TIMESTEP:.2f} s) must hold a whole number of "
-                   f"{robot.name}'s {robot.gait_period} s gait periods")
+        try:
+            periods_per_action(robot, steps)
+        except ValueError as error:
+            c.fail(str(error))
 
 
 def check_policy(c: Checker) -> None:

@@ -27,11 +27,12 @@ def task_evaluation(rollout, task, *, method: str, robot: str, setting: str, see
                "plan_seconds": float(rollout.plan_seconds)}
     if task.has_success:
         metrics["success_rate"] = float(np.mean(result.success))
-    if hasattr(task, "path_distance") and rollout.com_paths is not None:
-        distance = task.path_distance(rollout.com_paths[..., :2]).mean(1)  # per episode, over 100 Hz samples
-        for row, value in zip(rows, distance):
-            row["path_distance"] = float(value)
-        metrics["path_distance"] = float(distance.mean())
+    for name, values in rollout.metrics.items():  # per episode, e.g. the mean distance to the path (m)
+        for row, value in zip(rows, values):
+            row[name] = float(value)
+        metrics[name] = float(np.mean(values))
+    for term, values in result.cost_terms.items():  # the named terms of the cost, per step
+        metrics[f"cost_{term}"] = float(np.mean(values))
     recording = {}
     if rollout.com_paths is not None:
         recording = {"com_paths": rollout.com_paths.astype(np.float32), "foot_contacts": rollout.foot_contacts,
@@ -79,9 +80,8 @@ def task_video(evaluation: TaskEvaluation, task, robot, path: Path, *, disabled_
     if qpos is None or not len(qpos):
         return None
     stride = int(round(1.0 / (VIDEO_FPS * CONTROL_TIMESTEP)))
-    markers = getattr(task, "goals", None)
-    markers = markers[:1].numpy() if markers is not None else getattr(task, "references", None)
-    markers = None if markers is None else np.asarray(markers)[:: max(1, len(markers) // 40)]
+    markers = task.markers(episode=0)
+    markers = markers[:: max(1, len(markers) // 40)]
     frames = render_frames(robot, qpos[0, ::stride], disabled_legs=disabled_legs, markers=markers)
     save_video(frames, path, fps=VIDEO_FPS)
     return frames

@@ -29,6 +29,7 @@ from hierloco.components.evaluation import check_gait_policy, run_task
 from hierloco.components.expert_library import ExpertLibrary, build_expert_library, require_expert_library_quality
 from hierloco.components.gait_policy import TrainedGaitPolicy, train_gait_policy
 from hierloco.envs.latent_env import LatentActionEnv
+from hierloco.envs.locomotion import periods_per_action
 from hierloco.envs.robots import CONTROL_TIMESTEP
 from hierloco.io import load_json, save_json
 from hierloco.results import TaskEvaluation
@@ -116,10 +117,9 @@ def gait_policy_stage(cfg, experts: Stage) -> Stage:
 
 def build_gait_policy(run, params, library: ExpertLibrary) -> TrainedGaitPolicy:
     """``pi(t, z)`` and one latent per expert, fitted jointly to the experts (Li et al., Sec. III-B)."""
-    p = dict(params)
-    periods = int(round(library.steps_per_action * CONTROL_TIMESTEP / run.robot.gait_period))
-    trained = train_gait_policy(library.joint_targets, periods_per_action=periods, progress=run.progress, **p)
-    run.logger.log_scalar("train/gait_policy/rmse", trained.metadata["rmse"], step=p["epochs"])
+    periods = periods_per_action(run.robot, library.steps_per_action)
+    trained = train_gait_policy(library.joint_targets, periods_per_action=periods, progress=run.progress, **params)
+    run.logger.log_scalar("train/gait_policy/rmse", trained.metadata["rmse"], step=params["epochs"])
     return trained
 
 

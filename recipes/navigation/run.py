@@ -54,8 +54,7 @@ def main(cfg: DictConfig) -> None:
     low_level = trained.low_level()
     planner = trained.planner(name="random_shooting", horizon=cfg.planner.horizon,
                               num_candidates=cfg.planner.num_candidates)
-    task = TrajectoryTracking(path=path, speed=cfg.speed, extra_steps=cfg.extra_steps)
-    task.name = "navigation"
+    task = TrajectoryTracking(path=path, speed=cfg.speed, extra_steps=cfg.extra_steps, name="navigation")
     env = LatentActionEnv(low_level, num_robots=1, record=True, seed=cfg.seed, obstacles=arena.obstacles)
     rollout = run_task(env, planner, task, progress=cfg.progress)
     env.close()
@@ -63,7 +62,7 @@ def main(cfg: DictConfig) -> None:
     result = {"robot": cfg.robot, "seed": cfg.seed, "arena_seed": cfg.arena.seed,
               "num_obstacles": len(arena.obstacles), "path_length": task.length,
               "normalized_cost": float(rollout.result.normalized_cost[0]),
-              "mean_path_distance": float(task.path_distance(com).mean()),
+              "mean_path_distance": float(rollout.metrics["path_distance"][0]),
               "final_distance_to_goal": float(np.linalg.norm(com[-1] - np.asarray(arena.goal))),
               "goal_reached": bool(np.linalg.norm(com[-1] - np.asarray(arena.goal)) <= 0.2),
               "min_planned_clearance": float(clearance(arena, path).min()),

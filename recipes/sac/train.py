@@ -20,7 +20,7 @@ from hierloco.envs.transforms import GoalObservation
 from recipes.common.config import make_task_from_spec
 from recipes.common.entry import recipe_main
 from recipes.common.run import open_run
-from utils import METHOD, checks, manifest, plan, task_env, training_task
+from utils import METHOD, checks, manifest, plan, task_env
 
 
 @recipe_main(__file__)
@@ -48,7 +48,7 @@ def make_low_level(run, trained):
 
 def train_sac(run, params, low_level) -> SACAgent:
     """Goal-conditioned SAC on the training half of a task's targets for ``total_frames`` high-level actions."""
-    task = training_task(make_task_from_spec(params["task_name"], params["task"]))
+    task = make_task_from_spec(params["task_name"], params["task"]).training_split()  # half of the targets
     tag = params["task_name"]
     torch.manual_seed(params["seed"])
     agent = SACAgent.build(GoalObservation.SIZE, low_level.action_low, low_level.action_high, hidden=params["hidden"],

@@ -1,19 +1,18 @@
-"""Factories of the SAC recipe: its plan of stages, the training variant of each task, the training env and the
-evaluation of a trained policy. The LAT low level comes from the shared stages (``recipes/common/stages.py``); the
+"""Factories of the SAC recipe: its plan of stages, the training env and the evaluation of a trained policy (each
+task trains on its own ``training_split()``, half of its targets). The LAT low level comes from the shared stages (``recipes/common/stages.py``); the
 SAC training loop is in ``train.py``."""
 
 from __future__ import annotations
 
-import numpy as np
 import torch
-from tensordict.nn import InteractionType, set_interaction_type
 from torchrl.envs import Compose, TransformedEnv
 
 from hierloco.components.evaluation import run_task
+from hierloco.components.policies import ActorPolicy
 from hierloco.components.sac import SACAgent
 from hierloco.envs.latent_env import LatentActionEnv
-from hierloco.envs.tasks import GoalReaching, Task, TrajectoryTracking, VelocityTracking
-from hierloco.envs.transforms import GoalObservation, TaskTransform
+from hierloco.envs.tasks import Task
+from hierloco.envs.transforms import GoalObservation, task_transforms
 from recipes.common import config, report, stages
 from recipes.common.config import make_task_from_spec, section
 
@@ -72,41 +71,11 @@ def sac_evaluation_stage(cfg, name: str, spec: dict, agent: stages.Stage) -> sta
                         stages.TaskEvaluation, build_evaluation)
 
 
-def training_task(task: Task) -> Task:
-    """The same task on half of its targets (SAC is trained on these and tested on all): every other goal, every
-    other target velocity, the first half of the path."""
-    if isinstance(task, GoalReaching):
-        half = GoalReaching(goals=task.goals[::2].numpy(), num_steps=task.num_steps)
-    elif isinstance(task, VelocityTracking):
-        half = VelocityTracking(velocities=task.velocities[::2].numpy(), steps_per_target=task.steps_per_target,
-                                rounds=2 * task.num_steps // (len(task.velocities) * task.steps_per_target))
-    elif isinstance(task, TrajectoryTracking):
-        path = task.path.numpy()
-        half = TrajectoryTracking(path=path[: len(path) // 2 + 1], speed=task.speed,
-                                  extra_steps=task.num_steps - int(np.ceil(task.length / task.speed)))
-    else:
-        raise ValueError(f"no training variant for task {task.name!r}")
-    half.name = f"{task.name}_train"
-    return half
-
-
 def task_env(low_level, task: Task, num_robots: int, seed: int, nthread: int | None = None) -> TransformedEnv:
     """``num_robots`` robots on ``task``, robot ``b`` on episode ``b % episodes``, with the goal observation."""
     episodes = torch.arange(num_robots) % task.num_episodes
     env = LatentActionEnv(low_level, num_robots=num_robots, seed=seed, nthread=nthread)
-    return TransformedEnv(env, Compose(TaskTransform(task, episodes), GoalObservation(task)))
-
-
-class DeterministicPolicy:
-    """The actor acting with the mode of its action distribution (no exploration), for evaluation."""
-
-    def __init__(self, agent: SACAgent):
-        self.actor = agent.actor
-
-    @torch.no_grad()
-    def __call__(self, tensordict):
-        with set_interaction_type(InteractionType.DETERMINISTIC):
-            return self.actor(tensordict)
+    return TransformedEnv(env, Compose(task_transforms(task, episodes), GoalObservation(task)))
 
 
 def build_evaluation(run, params, agent: SACAgent, low_level) -> stages.TaskEvaluation:
@@ -115,7 +84,7 @@ def build_evaluation(run, params, agent: SACAgent, low_level) -> stages.TaskEval
     env = LatentActionEnv(low_level, num_robots=task.num_episodes, record=True, seed=params["seed"],
                           nthread=run.nthread)
     try:
-        rollout = run_task(env, DeterministicPolicy(agent), task, transforms=[GoalObservation(task)],
+        rollout = run_task(env, ActorPolicy(agent.actor), task, transforms=[GoalObservation(task)],
                            progress=run.progress)
     finally:
         env.close()

@@ -267,3 +267,23 @@ def _bad_inputs():
 def test_bad_inputs_are_refused(args, kwargs, message):
     with pytest.raises(ValueError, match=message):
         train_com_model(*args, **kwargs, hidden=8, max_epochs=1, progress=False)
+
+
+def test_net_is_a_torchrl_mlp_with_the_hand_built_layout_and_weights():
+    """Same layer creation order as the hand-built ``nn.Sequential`` it replaced: same initial weights under the
+    same seed, same state_dict keys (the checkpoint format is unchanged)."""
+    from torch import nn
+    from torchrl.modules import MLP
+
+    torch.manual_seed(3)
+    model = CoMDynamicsModel(action_dim=3)
+    torch.manual_seed(3)
+    hand_built = nn.Sequential(nn.Linear(5, 512), nn.ReLU(), nn.Linear(512, 512), nn.ReLU(), nn.Linear(512, 5))
+    assert isinstance(model.net, MLP)
+    assert list(model.net.state_dict()) == list(hand_built.state_dict())
+    for key, value in hand_built.state_dict().items():
+        torch.testing.assert_close(model.net.state_dict()[key], value, rtol=0, atol=0)
+    old_state = {f"net.{key}": value for key, value in hand_built.state_dict().items()}
+    fresh = CoMDynamicsModel(action_dim=3)
+    fresh.load_state_dict({**dict(fresh.state_dict()), **old_state})
+    torch.testing.assert_close(fresh(torch.ones(4, 2), torch.ones(4, 3)), model(torch.ones(4, 2), torch.ones(4, 3)))

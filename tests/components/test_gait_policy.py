@@ -83,3 +83,24 @@ def test_bad_input_is_refused():
         LatentGaitPolicy(num_joints=4, latent_dim=0)
     with pytest.raises(ValueError, match="G x N x J"):
         train_gait_policy(np.zeros((10, 4)), progress=False)
+
+
+def test_net_is_a_torchrl_mlp_with_the_hand_built_layout_and_weights():
+    """The 2 x 512 ReLU net is torchrl's MLP: the same layer creation order as the hand-built ``nn.Sequential`` it
+    replaced, so the same seed gives the same initial weights and old checkpoints load unchanged."""
+    from torch import nn
+    from torchrl.modules import MLP
+
+    torch.manual_seed(0)
+    policy = LatentGaitPolicy(num_joints=12, latent_dim=3, periods_per_action=5)
+    torch.manual_seed(0)
+    inputs = 2 * policy.num_harmonics + 3
+    hand_built = nn.Sequential(nn.Linear(inputs, 512), nn.ReLU(), nn.Linear(512, 512), nn.ReLU(),
+                               nn.Linear(512, 12))
+    assert isinstance(policy.net, MLP)
+    assert list(policy.net.state_dict()) == list(hand_built.state_dict()) == [
+        "0.weight", "0.bias", "2.weight", "2.bias", "4.weight", "4.bias"]
+    for key, value in hand_built.state_dict().items():
+        torch.testing.assert_close(policy.net.state_dict()[key], value, rtol=0, atol=0)
+    x = torch.randn(5, inputs)
+    torch.testing.assert_close(policy.net(x), hand_built(x), rtol=0, atol=0)

@@ -1,4 +1,5 @@
-"""Planner oracle tests: with a known analytic model the planners find the exact argmin (SPEC 5.4)."""
+"""Planner oracle tests: with a known analytic model the planners find the exact argmin (Li et al., RA-L 2021,
+Sec. III-A.2)."""
 
 import math
 
@@ -142,3 +143,22 @@ def test_bad_settings_are_refused():
         BoxCEMPlanner(env, num_candidates=10, top_k=20)
     with pytest.raises(ValueError, match="Categorical"):
         ExhaustivePlanner(env)
+
+
+@pytest.mark.parametrize("name", sorted(PLANNERS))
+def test_begin_task_retargets_the_world_model_and_forgets_the_warm_start(name):
+    """Planners are task policies: begin_task(task) scores with the new task's goals from the next call on."""
+    from hierloco.components.policies import TaskPolicy
+
+    env = make_env(GOALS)
+    planner = PLANNERS[name](env, 1)
+    assert isinstance(planner, TaskPolicy)
+    planner(start(env, POSITIONS))
+    assert planner.warm_start(3) is not None
+    mirrored = [[-g[0], -g[1]] for g in GOALS]
+    task = GoalReaching(goals=mirrored)
+    planner.begin_task(task)
+    assert env.task is task and planner.warm_start(3) is None
+    action = planner(start(env, [[0.0, 0.0]] * 3))["action"]
+    expected = torch.tensor(mirrored).clamp(-HALF_WIDTH, HALF_WIDTH)  # straight at the new goals, clipped
+    torch.testing.assert_close(action, expected, atol=0.05, rtol=0)

@@ -227,3 +227,40 @@ def test_non_finite_targets_are_an_error(bad):
     with pytest.raises(ValueError, match="NaN or inf"):
         sim.run(targets)
     np.testing.assert_array_equal(sim.state, before)  # nothing was simulated
+
+
+@pytest.mark.parametrize("noise", [-0.01, np.nan, "0.05"])
+def test_bad_joint_noise_is_an_error(noise):
+    with pytest.raises(ValueError, match="init_joint_noise"):
+        BatchedSimulator("a1", num_robots=2, init_joint_noise=noise)
+
+
+# ---------------------------------------------------------------- out-of-range targets, threads
+@pytest.mark.parametrize("name", ROBOTS)
+def test_targets_beyond_the_joint_range_are_clamped_to_it(name):
+    """1e12 rad (and -1e12) act exactly as the joint limits, and the limits are the model's control range."""
+    sims = [BatchedSimulator(name, num_robots=2, seed=0) for _ in range(3)]
+    low, high = sims[0].model.actuator_ctrlrange.T
+    targets = _gait_targets(sims[0].robot, 2, 30)
+    huge = targets.copy()
+    huge[:, 10:20, 0], huge[:, 10:20, 1] = 1e12, -1e12
+    at_limits = targets.copy()
+    at_limits[:, 10:20, 0], at_limits[:, 10:20, 1] = high[0], low[1]
+    results = [sim.run(t) for sim, t in zip(sims, (huge, at_limits, targets))]
+    np.testing.assert_array_equal(results[0].qpos, results[1].qpos)
+    np.testing.assert_array_equal(sims[0].state, sims[1].state)
+    pushed, plain = results[0].joint_positions[:, 19], results[2].joint_positions[:, 19]
+    assert np.all(pushed[:, 0] > plain[:, 0] + 0.05) and np.all(pushed[:, 1] < plain[:, 1] - 0.05)
+
+
+def test_threads_default_to_the_cores_the_process_may_use(monkeypatch):
+    from hierloco.envs import batched_sim
+
+    assert BatchedSimulator("a1", num_robots=2).nthread == batched_sim.available_cores()
+    assert batched_sim.available_cores() == len(__import__("os").sched_getaffinity(0))
+    monkeypatch.setattr(batched_sim.os, "sched_getaffinity", lambda pid: {0})  # e.g. a one-core Ray worker
+    assert BatchedSimulator("a1", num_robots=2).nthread == 1
+    assert BatchedSimulator("a1", num_robots=2, nthread=3).nthread == 3  # overridable
+    targets = _gait_targets(get_robot("a1"), 4, 20)
+    one, three = BatchedSimulator("a1", 4, seed=0, nthread=1), BatchedSimulator("a1", 4, seed=0, nthread=3)
+    np.testing.assert_array_equal(one.run(targets).qpos, three.run(targets).qpos)  # threads change no number

@@ -99,7 +99,7 @@ def test_physics_blow_up_sets_terminated_and_warns():
     robot = get_robot("a1")
     env = make_env("a1", seed=0)
     td = env.reset()
-    physics = env.base_env._env.physics  # the dm_control Physics under the TorchRL wrapper
+    physics = env.base_env.physics  # the dm_control Physics under the TorchRL wrapper
     physics.data.qvel[8] = 1e11  # beyond MuJoCo's limit: it warns and resets the data
     td.set("action", torch.as_tensor(robot.standing_pose, dtype=torch.float32))
     with pytest.warns(RuntimeWarning, match="physics became unstable"):
@@ -184,3 +184,54 @@ def test_unknown_disabled_leg_is_an_error():
 def test_non_positive_time_limit_is_an_error(time_limit):
     with pytest.raises(ValueError, match="time_limit must be positive"):
         make_env("a1", time_limit=time_limit)
+
+
+# ---------------------------------------------------------------- NaN, inf and out-of-range actions
+@pytest.mark.parametrize("name", ROBOTS)
+def test_nan_action_terminates_the_step_with_zero_reward(name):
+    robot = get_robot(name)
+    env = make_env(name, seed=0)
+    td = env.reset()
+    action = torch.as_tensor(robot.standing_pose, dtype=torch.float32).clone()
+    action[2] = float("nan")
+    with pytest.warns(RuntimeWarning, match="NaN joint targets"):
+        td = env.step(td.set("action", action))
+    out = td["next"]
+    assert out["terminated"].item() and out["done"].item() and not out["truncated"].item()
+    assert out["reward"].item() == 0.0  # not the reward of a robot standing
+    for key in ("com_state", "joint_positions", "joint_velocities"):
+        assert torch.isfinite(out[key]).all()
+    # the next episode starts clean and earns its reward again
+    td = env.rollout(5, policy=_constant_policy(robot.standing_pose))
+    assert len(td) == 5 and not td["next", "done"].any() and (td["next", "reward"] == 1).all()
+
+
+@pytest.mark.parametrize("bad", [float("inf"), float("-inf")])
+def test_infinite_action_is_refused(bad):
+    robot = get_robot("a1")
+    env = make_env("a1", seed=0)
+    td = env.reset()
+    action = torch.as_tensor(robot.standing_pose, dtype=torch.float32).clone()
+    action[4] = bad
+    with pytest.raises(ValueError, match=r"joint targets contain inf \(joints \[4\]\)"):
+        env.step(td.set("action", action))
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_huge_action_is_clamped_to_the_joint_range_as_in_the_batched_simulator(name):
+    """A 1e12 rad target acts as the joint limit (the model's control range, the one BatchedSimulator clamps to)."""
+    from hierloco.envs.batched_sim import BatchedSimulator
+
+    robot = get_robot(name)
+    low, high = BatchedSimulator(name, 1).model.actuator_ctrlrange.T
+    huge = torch.as_tensor(robot.standing_pose, dtype=torch.float32).clone()
+    beyond = huge.clone()
+    huge[0], huge[1] = 1e12, -1e12
+    beyond[0], beyond[1] = float(high[0]) + 0.5, float(low[1]) - 0.5
+    envs = [make_env(name, seed=0) for _ in range(2)]
+    rollouts = [env.rollout(30, policy=_constant_policy(a)) for env, a in zip(envs, (huge, beyond))]
+    torch.testing.assert_close(rollouts[0]["next", "joint_positions"], rollouts[1]["next", "joint_positions"],
+                               rtol=0, atol=0)
+    ctrl = envs[0].base_env.physics.data.ctrl
+    assert ctrl[0] == high[0] and ctrl[1] == low[1]  # exactly the limits, in float64
+    assert rollouts[0]["next", "joint_positions"][-1, 0] > robot.standing_pose[0] + 0.05  # pushed towards it

@@ -1,16 +1,19 @@
-"""TaskTransform on a real LatentActionEnv (Daisy replaying 3 experts): task state, -cost reward, time limit."""
+"""The task transforms on a real LatentActionEnv (Daisy replaying 3 experts): task state, -cost reward and its
+terms, the StepCounter time limit, partial resets, and falls that do not end an evaluation episode."""
 
+import numpy as np
 import pytest
 import torch
-from torchrl.envs import TransformedEnv
+from torchrl.envs import Compose, StepCounter, TransformedEnv
 from torchrl.envs.utils import check_env_specs
 
 from hierloco.components.expert_library import build_expert_library
 from hierloco.components.low_level import ExpertReplayLowLevel
 from hierloco.envs.latent_env import LatentActionEnv
-from hierloco.envs.robots import START_YAW
+from hierloco.envs.low_level import LowLevel
+from hierloco.envs.robots import START_YAW, get_robot
 from hierloco.envs.tasks import GoalReaching, VelocityTracking
-from hierloco.envs.transforms import TaskTransform
+from hierloco.envs.transforms import ContinueAfterFalls, TaskEpisode, TaskReward, TaskTransform, task_transforms
 
 THREE_GOALS = [[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0]]
 
@@ -26,7 +29,7 @@ def make_env(library):
 
     def make(task, num_robots=4, episodes=None):
         env = TransformedEnv(LatentActionEnv(ExpertReplayLowLevel(library), num_robots=num_robots, seed=0),
-                             TaskTransform(task, episodes))
+                             task_transforms(task, episodes))
         envs.append(env)
         return env
 
@@ -45,6 +48,10 @@ def test_check_env_specs(make_env):
     spec = env.observation_spec
     assert spec["task_episode"].shape == (2, 1) and spec["task_episode"].dtype == torch.int64
     assert spec["task_step"].shape == (2, 1) and spec["task_step"].dtype == torch.int64
+    assert spec["cost_tracking"].shape == spec["cost_yaw"].shape == (2, 1)
+    kinds = [type(t) for t in env.transform]
+    assert kinds == [TaskEpisode, StepCounter, TaskReward]
+    assert env.transform[1].max_steps == 2 and env.transform[1].step_count_key == "task_step"
 
 
 def test_reward_steps_and_time_limit(make_env):
@@ -147,3 +154,72 @@ def test_partial_reset(make_env):
         step, td = env.step_and_maybe_reset(td)
         truncated = step["next", "truncated"].squeeze(-1).tolist()
         assert truncated == [t == 4, t == 2, t == 4, t == 2]
+
+
+def test_reward_terms_add_up_to_minus_the_reward(make_env):
+    task = GoalReaching(goals=THREE_GOALS, num_steps=3)
+    env = make_env(task, num_robots=3)
+    td = env.reset()
+    assert torch.equal(td["cost_tracking"], torch.zeros(3, 1)) and torch.equal(td["cost_yaw"], torch.zeros(3, 1))
+    td["action"] = fixed_actions(3)
+    td = env.step(td)
+    step = torch.zeros(3, dtype=torch.int64)
+    terms = task.cost_terms(td["com_state"], td["next", "com_state"], torch.arange(3), step)
+    torch.testing.assert_close(td["next", "cost_tracking"].squeeze(-1), terms["tracking"], rtol=0, atol=0)
+    torch.testing.assert_close(td["next", "cost_yaw"].squeeze(-1), terms["yaw"], rtol=0, atol=0)
+    total = td["next", "cost_tracking"] + td["next", "cost_yaw"]
+    torch.testing.assert_close(td["next", "reward"], -total, rtol=0, atol=0)
+    assert bool((td["next", "cost_tracking"] > 1.0).all())  # about 2 * 1 m from each goal after one action
+
+
+def test_deprecated_task_transform_is_the_same_composition(library):
+    task = VelocityTracking(steps_per_target=1, rounds=1)
+    rewards = []
+    for transform in (TaskTransform(task), task_transforms(task)):
+        env = TransformedEnv(LatentActionEnv(ExpertReplayLowLevel(library), num_robots=2, seed=0), transform)
+        rewards.append(env.rollout(3, policy=lambda td: td.set("action", fixed_actions(2)))["next", "reward"])
+        env.close()
+    torch.testing.assert_close(rewards[0], rewards[1], rtol=0, atol=0)
+
+
+class Collapse(LowLevel):
+    """Sends every joint of A1 to zero for the first action (the robot falls), then holds the standing pose."""
+
+    kind = "collapse"
+
+    def __init__(self):
+        self.robot = get_robot("a1")
+        self.steps_per_action = 100
+        self.action_low, self.action_high = np.zeros(1), np.ones(1)
+        self.calls = 0
+
+    def run(self, sim, actions):
+        self.calls += 1
+        pose = np.zeros(self.robot.num_joints) if self.calls == 1 else np.asarray(self.robot.standing_pose)
+        return sim.run(np.tile(pose, (sim.num_robots, self.steps_per_action, 1)))
+
+
+@pytest.mark.parametrize("continue_after_falls", [False, True])
+def test_a_fall_ends_a_training_episode_but_not_an_evaluation_one(continue_after_falls):
+    task = GoalReaching(goals=THREE_GOALS[:2], num_steps=4)
+    transforms = [ContinueAfterFalls()] if continue_after_falls else []
+    env = TransformedEnv(LatentActionEnv(Collapse(), num_robots=2, seed=0),
+                         Compose(*transforms, task_transforms(task)))
+    check_env_specs(env)
+    env.base_env.low_level.calls = 0  # fall again on the next first action
+    rollout = env.rollout(4, policy=lambda td: td.set("action", torch.zeros(2, 1)), break_when_any_done=False)
+    env.close()
+    start = torch.tensor([0.0, 0.0])
+    moved_from_start = (rollout["com_state"][:, 1:, :2] - start).norm(dim=-1) > 1e-3
+    if continue_after_falls:
+        # the robots fell on the first action and stay where they fell: never reset, scored to the end
+        assert rollout["next", "fallen"].squeeze(-1).all()
+        assert not rollout["next", "terminated"].any()
+        assert rollout["next", "task_step"][0].squeeze(-1).tolist() == [1, 2, 3, 4]
+        assert rollout["next", "done"][0].squeeze(-1).tolist() == [False, False, False, True]
+        assert moved_from_start.all()
+    else:
+        # a fall terminates the episode and the rollout resets the robot to the start
+        assert rollout["next", "terminated"][:, 0].all()
+        assert rollout["task_step"][0, 1].item() == 0
+        assert not moved_from_start[:, 0].any()

@@ -1,4 +1,4 @@
-"""Tasks and the normalised-cost metric against the numbers of SPEC 6."""
+"""Tasks and the normalised-cost metric against the numbers of Li et al., RA-L 2021, Sec. IV-A."""
 
 import math
 
@@ -16,6 +16,7 @@ from hierloco.envs.tasks import (
     VelocityTracking,
     make_task,
     s_path,
+    task_options,
 )
 
 SCHEDULE = [(0.0, 0.2), (0.2, 0.0), (0.0, -0.2), (-0.2, 0.0)]  # m/s, world frame
@@ -376,3 +377,139 @@ def test_make_task():
         make_task("walking")
     for name in TASKS:
         assert name in str(info.value)
+
+
+# --- what a task carries: name, markers, extra metrics, training split, cost terms -------------------------------
+
+
+@pytest.mark.parametrize("name", sorted(TASKS))
+def test_name_defaults_to_the_registry_name_and_is_set_by_keyword(name):
+    task = make_task(name)
+    assert task.name == task.kind == name
+    renamed = make_task(name, name=f"{name}_custom")
+    assert renamed.name == f"{name}_custom" and renamed.kind == name
+    result = renamed.evaluate(standing(renamed))
+    assert result.task == f"{name}_custom"
+    assert make_task(name).name == name  # the class is untouched
+
+
+def test_markers():
+    goals = GoalReaching()
+    assert goals.markers().shape == (8, 2)
+    assert np.allclose(goals.markers(), goals.goals.numpy())
+    assert np.allclose(goals.markers(episode=3), goals.goals[3:4].numpy())
+    path = TrajectoryTracking()
+    assert path.markers().shape == (path.num_steps, 2)
+    assert np.all(path.path_distance(path.markers()) < 2e-3)  # on the path
+    assert path.markers().dtype == np.float64
+    assert VelocityTracking().markers().shape == (0, 2)
+
+
+def test_extra_metrics():
+    task = TrajectoryTracking()
+    rng = np.random.default_rng(0)
+    paths = rng.normal(size=(3, 50, 5))
+    metrics = task.extra_metrics(paths)
+    assert set(metrics) == {"path_distance"} and metrics["path_distance"].shape == (3,)
+    assert np.array_equal(metrics["path_distance"], task.path_distance(paths[..., :2]).mean(1))
+    points = s_path(501)
+    on_path = np.concatenate([points[None], np.zeros((1, len(points), 3))], -1)
+    assert task.extra_metrics(on_path)["path_distance"][0] < 2e-3
+    assert GoalReaching().extra_metrics(paths) == {} and VelocityTracking().extra_metrics(paths) == {}
+
+
+def test_training_split_goals_every_other_on_both_axes():
+    task = GoalReaching(name="goals")
+    half = task.training_split()
+    assert isinstance(half, GoalReaching) and half.name == "goals_train"
+    assert torch.equal(half.goals, task.goals[[0, 2, 4, 6]])
+    assert half.num_steps == task.num_steps
+    on_x = (half.goals[:, 1].abs() < 1e-6) & (half.goals[:, 0].abs() > 1)
+    on_y = (half.goals[:, 0].abs() < 1e-6) & (half.goals[:, 1].abs() > 1)
+    assert on_x.sum() == 2 and on_y.sum() == 2
+
+
+def test_training_split_velocities_first_half_on_both_axes():
+    task = VelocityTracking()
+    half = task.training_split()
+    assert half.name == "velocity_tracking_train"
+    assert torch.equal(half.velocities, torch.tensor([[0.0, 0.2], [0.2, 0.0]]))  # one target on each axis
+    assert half.steps_per_target == 5 and half.num_steps == task.num_steps == 40
+    odd = VelocityTracking(velocities=[[0.1, 0.0], [0.0, 0.1], [-0.1, 0.0]], steps_per_target=2, rounds=1)
+    odd_half = odd.training_split()
+    assert len(odd_half.velocities) == 2 and odd_half.num_steps >= odd.num_steps
+
+
+def test_training_split_path_first_half():
+    task = TrajectoryTracking(speed=0.2, extra_steps=3)
+    half = task.training_split()
+    assert half.name == "trajectory_tracking_train"
+    assert half.speed == 0.2 and half.extra_steps == 3
+    assert len(half.path) == len(task.path) // 2 + 1 and torch.equal(half.path, task.path[: len(half.path)])
+    assert half.length == pytest.approx(task.length / 2, rel=1e-3)  # the S path is symmetric
+
+
+@pytest.mark.parametrize("name", sorted(TASKS))
+def test_cost_is_the_sum_of_the_named_terms(name):
+    task = make_task(name)
+    gen = torch.Generator().manual_seed(3)
+    state, next_state = torch.randn(64, 5, generator=gen), torch.randn(64, 5, generator=gen)
+    episode = torch.randint(0, task.num_episodes, (64,), generator=gen)
+    step = torch.randint(0, task.num_steps, (64,), generator=gen)
+    terms = task.cost_terms(state, next_state, episode, step)
+    assert list(terms) == list(task.cost_term_names) == ["tracking", "yaw"]
+    assert torch.equal(task.cost(state, next_state, episode, step), terms["tracking"] + terms["yaw"])
+    # the formula of the paper, term by term: w1 * tracking error + w2 * |wrapped yaw error|
+    target = task.target(episode, step)
+    yaw = wrap_angle(START_YAW - next_state[:, 2]).abs()
+    assert torch.equal(terms["yaw"], 1.0 * yaw)
+    assert torch.equal(terms["tracking"], 2.0 * task._tracking_error(state, next_state, target))
+
+
+def test_task_result_carries_the_mean_cost_terms():
+    task = GoalReaching()
+    turned = standing(task)
+    turned[:, 1:, 2] += 0.3  # yaw 0.3 rad off from the first step on
+    result = task.evaluate(turned)
+    assert set(result.cost_terms) == {"tracking", "yaw"}
+    assert np.allclose(result.cost_terms["tracking"], 4.0)  # 2 * 2 m from every goal
+    assert np.allclose(result.cost_terms["yaw"], 0.3)
+    assert np.allclose(result.cost_terms["tracking"] + result.cost_terms["yaw"], result.costs.mean(1))
+
+
+def test_make_task_refuses_unknown_options_naming_the_valid_ones():
+    with pytest.raises(ValueError, match="unknown option 'radus'") as info:
+        make_task("goal_reaching", radus=2)
+    for option in ("radius", "num_goals", "num_steps", "angle_offset", "goals", "name"):
+        assert option in str(info.value)
+    with pytest.raises(ValueError, match="unknown options 'speeed', 'pth'"):
+        make_task("trajectory_tracking", speeed=1, pth=None)
+    assert task_options("velocity_tracking") == ["velocities", "steps_per_target", "rounds", "name"]
+
+
+@pytest.mark.parametrize("name, options, message", [
+    ("goal_reaching", dict(radius="2"), "radius must be a finite number"),
+    ("goal_reaching", dict(radius=math.nan), "radius must be a finite number"),
+    ("goal_reaching", dict(radius=True), "radius must be a finite number"),
+    ("goal_reaching", dict(num_goals="8"), "num_goals must be a whole number"),
+    ("goal_reaching", dict(num_steps=2.5), "num_steps must be a whole number"),
+    ("goal_reaching", dict(num_steps=math.nan), "num_steps must be a whole number"),
+    ("goal_reaching", dict(angle_offset=math.inf), "angle_offset must be a finite number"),
+    ("goal_reaching", dict(goals=[["a", "b"]]), "goals must be a list of"),
+    ("goal_reaching", dict(goals="far"), "goals must be a list of"),
+    ("goal_reaching", dict(name=3), "name must be a non-empty string"),
+    ("velocity_tracking", dict(velocities="fast"), "velocities must be a list of"),
+    ("velocity_tracking", dict(velocities=[[0.1, math.nan]]), "velocities must be finite"),
+    ("velocity_tracking", dict(rounds="2"), "rounds must be a whole number"),
+    ("trajectory_tracking", dict(speed="0.1"), "speed must be a finite number"),
+    ("trajectory_tracking", dict(speed=math.nan), "speed must be a finite number"),
+    ("trajectory_tracking", dict(extra_steps=1.5), "extra_steps must be a whole number"),
+    ("trajectory_tracking", dict(path=[[0.0, 0.0], ["x", 1.0]]), "path must be a list of"),
+])
+def test_make_task_refuses_bad_values_clearly(name, options, message):
+    with pytest.raises(ValueError, match=message):
+        make_task(name, **options)
+
+
+def test_whole_floats_are_accepted():
+    assert make_task("goal_reaching", num_goals=4.0, num_steps=5.0).num_steps == 5

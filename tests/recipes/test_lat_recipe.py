@@ -107,7 +107,7 @@ def artifact_bytes(run_dir: Path) -> dict:
     """Every training artifact and its key, by relative path."""
     return {str(p.relative_to(run_dir)): p.read_bytes() for p in sorted(run_dir.rglob("*"))
             if p.is_file() and p.suffix in (".npz", ".pt", ".json") and "evaluation" not in str(p.relative_to(run_dir))
-            and p.name != "report.json"}
+            and p.name != "report.json" and not str(p.relative_to(run_dir)).startswith("logs")}
 
 
 def test_evaluate_adds_a_task_without_touching_training(tiny_run, tmp_path):

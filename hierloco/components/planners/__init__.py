@@ -1,4 +1,5 @@
-"""MPC planners over any action box and any learned world model (SPEC 5.4)."""
+"""MPC planners over any action box and any learned world model (Li et al., RA-L 2021, Sec. III-A.2: random
+shooting with 8000 samples over a horizon of 1; CEM, MPPI with warm starts and exhaustive search are options)."""
 
 from hierloco.components.planners.base import BoxPlannerBase
 from hierloco.components.planners.cem import BoxCEMPlanner

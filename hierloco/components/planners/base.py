@@ -2,7 +2,9 @@
 
 A planner subclass writes only ``planning(tensordict) -> action``; it proposes ``B x S x H x A`` candidate action
 sequences and calls :meth:`BoxPlannerBase.score`, which rolls them out on the (not batch-locked) world model env and
-sums the rewards over the horizon.
+sums the rewards over the horizon (Li et al., RA-L 2021, Sec. III-A.2, Eq. 1). Every planner is a
+:class:`hierloco.components.policies.TaskPolicy`: :meth:`BoxPlannerBase.begin_task` re-targets the world model to a
+task and forgets the warm start.
 """
 
 from __future__ import annotations
@@ -12,12 +14,15 @@ from tensordict import TensorDictBase
 from torchrl.data import Categorical
 from torchrl.modules.planners import MPCPlannerBase
 
+from hierloco.components.policies import TaskPolicy
 
-class BoxPlannerBase(MPCPlannerBase):
+
+class BoxPlannerBase(MPCPlannerBase, TaskPolicy):
     """MPC over a box (or finite set) of actions with a learned world model.
 
     Args:
-        env: a world model env, e.g. :class:`hierloco.envs.world_model.CoMWorldModelEnv`.
+        env: a world model env, e.g. :class:`hierloco.envs.world_model.CoMWorldModelEnv` (to plan a task with
+            :meth:`begin_task`, it needs ``set_task(task)``).
         planning_horizon: H, high-level actions looked ahead.
         num_candidates: S, action sequences scored per call and per robot.
         seed: seeds the planner's own random generator.
@@ -47,6 +52,12 @@ class BoxPlannerBase(MPCPlannerBase):
     def reset(self) -> None:
         """Forgets the previous plan (call between episodes)."""
         self._previous = None
+
+    def begin_task(self, task) -> None:
+        """Scores plans with ``task``'s cost from now on (the world model's ``set_task``) and forgets the previous
+        plan."""
+        self.env.set_task(task)
+        self.reset()
 
     def sample_uniform(self, batch: int, count: int) -> torch.Tensor:
         """``batch x count x H x A`` action sequences uniform in the box."""
