@@ -71,8 +71,9 @@ class TrainedRun:
     @property
     def robot(self):
         from hierloco.envs.robots import get_robot
+        from hierloco.envs.robots.profiles import with_profile
 
-        return get_robot(self.manifest["robot"])
+        return with_profile(get_robot(self.manifest["robot"]), self.manifest.get("robot_profile", "own"))
 
     @property
     def settings(self) -> list[str]:

@@ -95,6 +95,7 @@ class BatchedSimulator:
         robot: a registered robot name or a :class:`RobotSpec`.
         num_robots: B, the number of copies.
         disabled_legs: legs locked at their standing angles (their targets are ignored).
+        limp_legs: legs whose servos are off (unpowered: their joints swing freely, with their damping).
         obstacles: static boxes in the world (:class:`hierloco.envs.robots.Obstacle`), e.g. a navigation arena.
         init_joint_noise: uniform noise in rad on the standing joint angles at reset
             (:func:`hierloco.envs.locomotion.reset_joint_noise`).
@@ -107,15 +108,16 @@ class BatchedSimulator:
 
     def __init__(self, robot: str | RobotSpec, num_robots: int, *, disabled_legs: Sequence[str] = (),
                  init_joint_noise: float = 0.0, seed: int | None = None, nthread: int | None = None,
-                 obstacles: Sequence = ()):
+                 obstacles: Sequence = (), limp_legs: Sequence[str] = ()):
         if int(num_robots) < 1:
             raise ValueError(f"num_robots must be at least 1, got {num_robots}")
         self.robot = get_robot(robot)
         self.num_robots = int(num_robots)
         self.disabled_legs = tuple(disabled_legs)
+        self.limp_legs = tuple(limp_legs)
         self.init_joint_noise = check_joint_noise(init_joint_noise)
         self.obstacles = tuple(obstacles)
-        self.model = compile_model(self.robot, self.disabled_legs, self.obstacles)
+        self.model = compile_model(self.robot, self.disabled_legs, self.obstacles, limp_legs=self.limp_legs)
         self.nthread = int(nthread) if nthread is not None else available_cores()
         self._datas = [mujoco.MjData(self.model) for _ in range(max(1, self.nthread))]
         self._pool = mj_rollout.Rollout(nthread=self.nthread if self.nthread > 1 else 0)

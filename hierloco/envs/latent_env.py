@@ -37,7 +37,8 @@ class LatentActionEnv(EnvBase):
         low_level: turns actions into joint targets, a :class:`hierloco.envs.low_level.LowLevel` (the latent gait
             policy, expert replay and the Raibert controller are in :mod:`hierloco.components.low_level`).
         num_robots: B, the env's batch size.
-        disabled_legs: legs locked at their standing angles (the adverse setting).
+        disabled_legs: legs locked at their standing angles (the paper's adverse setting).
+        limp_legs: legs whose servos are off (another fault model, see :mod:`hierloco.envs.faults`).
         init_joint_noise: rad of uniform noise on the standing joint angles at reset.
         record: also return, per action, the ``N`` CoM states ``com_path`` (``B x N x 5``), foot contacts
             ``foot_contacts`` (``B x N x L``) and generalised positions ``qpos`` (``B x N x nq``), for plots and
@@ -49,14 +50,15 @@ class LatentActionEnv(EnvBase):
 
     def __init__(self, low_level: LowLevel, num_robots: int = 1, *, disabled_legs: Sequence[str] = (),
                  init_joint_noise: float = 0.02, record: bool = False, seed: int | None = None,
-                 nthread: int | None = None, obstacles: Sequence = (), device: str = "cpu"):
+                 nthread: int | None = None, obstacles: Sequence = (), device: str = "cpu",
+                 limp_legs: Sequence[str] = ()):
         super().__init__(batch_size=torch.Size([int(num_robots)]), device=device)
         self.low_level = low_level
         self.robot = low_level.robot
         self.record = record
         self.sim = BatchedSimulator(self.robot, int(num_robots), disabled_legs=disabled_legs,
                                     init_joint_noise=init_joint_noise, seed=seed, nthread=nthread,
-                                    obstacles=obstacles)
+                                    obstacles=obstacles, limp_legs=limp_legs)
         self.steps_per_action = low_level.steps_per_action
         b = int(num_robots)
         observation = {"com_state": Unbounded((b, 5), device=self.device),

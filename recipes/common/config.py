@@ -12,7 +12,7 @@ from typing import Any, Callable, Iterable
 
 from omegaconf import DictConfig, ListConfig, OmegaConf, open_dict
 
-SETTINGS = ("normal", "legs_disabled")
+from hierloco.envs.faults import FAULTS as SETTINGS  # normal and the fault models
 CONTINUOUS_PLANNERS = ("random_shooting", "cem", "mppi")
 LIST_OPTIONS = ("settings", "eval.videos", "logger.backends")
 
@@ -126,8 +126,10 @@ def check_common(c: Checker, robot_checks: bool = True) -> Any:
         c.fail(f"settings {settings} lists a setting twice")
     robot = None
     if robot_checks:
+        from hierloco.envs.robots.profiles import with_profile
+
         try:
-            robot = get_robot(cfg.robot)
+            robot = with_profile(get_robot(cfg.robot), get(cfg, "robot_profile", "own"))
         except (ValueError, FileNotFoundError, OSError) as error:
             c.fail(str(error))
     return robot

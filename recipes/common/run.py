@@ -18,6 +18,8 @@ import numpy as np
 import torch
 from omegaconf import DictConfig, OmegaConf
 
+from hierloco.envs.faults import fault_legs
+from hierloco.envs.robots import get_robot
 from hierloco.io import write_text
 from hierloco.loggers import NullLogger, RunLogger, metric_component
 from hierloco.results import TaskEvaluation, write_results
@@ -25,7 +27,7 @@ from hierloco.runs import RunDirectory
 from hierloco.trained import MANIFEST
 from recipes.common import report
 from recipes.common.config import ConfigError, make_task_from_spec, section
-from recipes.common.stages import Stage, disabled_legs, task_specs
+from recipes.common.stages import Stage, task_specs
 
 CURRENT: dict = {}  # the run directory and stage of this process's run, for the interrupt message
 EVALUATE: dict = {}  # set by recipes/common/evaluate.py: {"out": folder}: training stages must be finished
@@ -49,7 +51,9 @@ def resolve_run_dir(cfg, method: str, robot) -> Path:
     job's overrides are appended, so the jobs of a sweep never share a directory."""
     if cfg.run_dir is not None:
         return Path(str(cfg.run_dir))
-    path = Path("outputs") / method / str(cfg.get("preset_name", "custom")) / f"{robot.name}_seed{cfg.seed}"
+    profile = cfg.get("robot_profile", "own")
+    name = robot.name if profile == "own" else f"{robot.name}-{profile}"
+    path = Path("outputs") / method / str(cfg.get("preset_name", "custom")) / f"{name}_seed{cfg.seed}"
     try:
         from hydra.core.hydra_config import HydraConfig
         from hydra.types import RunMode
@@ -178,7 +182,7 @@ class Run:
             video = self.out / "videos" / f"{setting}_{name}.mp4"
             if name in (self.cfg.eval.videos or []) and not video.exists():
                 frames = report.task_video(evaluation, task, self.robot, video,
-                                           disabled_legs=disabled_legs(self.robot, setting))
+                                           disabled_legs=fault_legs(self.robot, setting)[0])
                 if frames is None:
                     print(f"no video of {setting}/{name}: its evaluation kept no joint positions")
                 else:
@@ -212,7 +216,8 @@ def open_run(cfg: DictConfig, method: str, plan: Callable, checks: Callable | No
     directory.verify(specs)  # again, now that no other process can write it
     logger = None
     if not directory.readonly and not EVALUATE:
-        info = {"method": method, "robot": robot.reference, "seed": int(cfg.seed), "settings": list(cfg.settings),
+        info = {"method": method, "robot": get_robot(cfg.robot).reference,
+                "robot_profile": cfg.get("robot_profile", "own"), "seed": int(cfg.seed), "settings": list(cfg.settings),
                 "planner": section(cfg, "planner") if "planner" in cfg else {},
                 **(manifest(cfg, robot) if manifest is not None else {})}
         write_text(directory.path / MANIFEST, json.dumps(info, indent=2))

@@ -28,6 +28,7 @@ from hierloco.components.dynamics_data import TransitionData, collect_transition
 from hierloco.components.evaluation import check_gait_policy, run_task
 from hierloco.components.expert_library import ExpertLibrary, build_expert_library, require_expert_library_quality
 from hierloco.components.gait_policy import TrainedGaitPolicy, train_gait_policy
+from hierloco.envs.faults import fault_legs
 from hierloco.envs.latent_env import LatentActionEnv
 from hierloco.envs.locomotion import periods_per_action
 from hierloco.envs.robots import CONTROL_TIMESTEP
@@ -160,7 +161,8 @@ MODEL_KEYS = ("hidden", "lr", "batch_size", "holdout", "patience", "max_epochs")
 
 def dynamics_data_stage(cfg, low_level: dict, setting: str, robot) -> Stage:
     d = section(cfg, "dynamics")
-    params = {"seed": cfg.seed, "setting": setting, "disabled_legs": list(disabled_legs(robot, setting)),
+    locked, limp = fault_legs(robot, setting)
+    params = {"seed": cfg.seed, "setting": setting, "disabled_legs": list(locked), "limp_legs": list(limp),
               **{k: d[k] for k in DATA_KEYS}}
     return Stage(f"dynamics_data_{setting}", params, {"low_level": low_level},
                  f"dynamics_data_{setting}.npz", TransitionData, build_dynamics_data)
@@ -169,7 +171,8 @@ def dynamics_data_stage(cfg, low_level: dict, setting: str, robot) -> Stage:
 def build_dynamics_data(run, params, make_low_level) -> TransitionData:
     """Random actions held for one action each, chained on many robots (Li et al., Sec. III-C)."""
     env = LatentActionEnv(make_low_level(params["num_robots"]), num_robots=params["num_robots"],
-                          disabled_legs=params["disabled_legs"], seed=params["seed"], nthread=run.nthread)
+                          disabled_legs=params["disabled_legs"], limp_legs=params["limp_legs"], seed=params["seed"],
+                          nthread=run.nthread)
     try:
         return collect_transitions(env, params["num_transitions"], episode_length=params["episode_length"],
                                    seed=params["seed"], progress=run.progress)
@@ -212,8 +215,9 @@ def build_evaluation(run, params, make_low_level, model: TrainedCoMModel) -> Tas
     low = make_low_level(task.num_episodes)
     world_model = make_world_model(model.model, low, device=params["device"])
     planner = make_planner(world_model, seed=params["seed"], **params["planner"])
-    env = LatentActionEnv(low, num_robots=task.num_episodes, disabled_legs=disabled_legs(run.robot, params["setting"]),
-                          record=True, seed=params["seed"], nthread=run.nthread)
+    locked, limp = fault_legs(run.robot, params["setting"])
+    env = LatentActionEnv(low, num_robots=task.num_episodes, disabled_legs=locked, limp_legs=limp, record=True,
+                          seed=params["seed"], nthread=run.nthread)
     try:
         rollout = run_task(env, planner, task, progress=run.progress)
     finally:
@@ -223,11 +227,6 @@ def build_evaluation(run, params, make_low_level, model: TrainedCoMModel) -> Tas
 
 
 # ---------------------------------------------------------------------------------------------------- helpers
-def disabled_legs(robot, setting: str) -> tuple[str, ...]:
-    """The legs locked in ``setting``: the rear legs in the adverse setting, none otherwise."""
-    return tuple(robot.rear_legs) if setting == "legs_disabled" else ()
-
-
 def evaluation_stages(cfg, setting: str, model: Stage, low_level: dict) -> list[Stage]:
     return [evaluation_stage(cfg, name, spec, setting, model, low_level) for name, spec in task_specs(cfg).items()]
 

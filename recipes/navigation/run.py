@@ -1,4 +1,4 @@
-"""Navigation in a cluttered arena: plan a collision-free path, then follow it with LAT (SPEC 8).
+"""Navigation in a cluttered arena: plan a collision-free path, then follow it with LAT (``docs/index.md``, Navigation).
 
     python recipes/navigation/run.py                     # A1, the paper-scale LAT run (trained first if needed)
     python recipes/navigation/run.py robot=daisy arena.seed=2 arena.num_obstacles=14

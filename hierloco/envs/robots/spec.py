@@ -166,6 +166,7 @@ class RobotSpec:
     kp: tuple[float, ...] | None = None
     torque_limit: tuple[float, ...] | None = None
     joint_damping: tuple[float, ...] | None = None
+    foot_friction: float | None = None
     description: str = field(default="", compare=False)
     source: str = field(default=PYTHON_SOURCE, compare=False)
 
@@ -206,6 +207,8 @@ class RobotSpec:
             value = getattr(self, name)
             if not (_finite(value) and value > 0):
                 raise ValueError(f"{where}: {name} must be a finite positive number, got {value!r}")
+        if self.foot_friction is not None and not (_finite(self.foot_friction) and self.foot_friction > 0):
+            raise ValueError(f"{where}: foot_friction must be a finite positive number, got {self.foot_friction!r}")
         if self.min_height is not None and not (_finite(self.min_height) and self.min_height >= 0):
             raise ValueError(f"{where}: min_height must be a finite number >= 0, got {self.min_height!r}")
         # derive what was not given (one compiled model for both)
@@ -316,9 +319,11 @@ class Obstacle:
 
 
 def compile_model(robot: RobotSpec, disabled_legs: Sequence[str] = (),
-                  obstacles: Sequence[Obstacle] = ()) -> mujoco.MjModel:
-    """Build the simulation model of ``robot`` with the legs in ``disabled_legs`` locked at their standing angles,
-    in a world with static ``obstacles`` (an arena).
+                  obstacles: Sequence[Obstacle] = (), limp_legs: Sequence[str] = ()) -> mujoco.MjModel:
+    """Build the simulation model of ``robot`` with the legs in ``disabled_legs`` locked at their standing angles
+    and those in ``limp_legs`` unpowered (their servos exert no torque; the joints keep their damping), in a world
+    with static ``obstacles`` (an arena). With ``robot.foot_friction`` the feet's contacts have that friction
+    coefficient (the foot geoms take priority over what they touch).
 
     Returns a :class:`mujoco.MjModel` whose ``nu`` actuators are position servos on ``robot.joint_names`` in that
     order, with one touch sensor per foot (in leg order, on the sites ``hierloco_touch_<leg>``) and nothing else
@@ -326,6 +331,9 @@ def compile_model(robot: RobotSpec, disabled_legs: Sequence[str] = (),
     """
     disabled = set(disabled_legs)
     robot.leg_joint_indices(sorted(disabled))  # validates the names
+    limp = robot.leg_joint_indices(tuple(limp_legs))
+    if disabled & set(limp_legs):
+        raise ValueError(f"robot {robot.name!r}: legs {sorted(disabled & set(limp_legs))} are both locked and limp")
     spec = robot.build_spec()
     spec.compiler.degree = False
     spec.option.timestep = PHYSICS_TIMESTEP
@@ -352,6 +360,13 @@ def compile_model(robot: RobotSpec, disabled_legs: Sequence[str] = (),
     _add_joint_locks(spec, robot, disabled)
     model = spec.compile()
     _check_model(model, robot)
+    if robot.foot_friction is not None:
+        feet = foot_geoms(model, robot)
+        model.geom_friction[feet, 0] = robot.foot_friction
+        model.geom_priority[feet] = 1  # the foot's friction is the contact's, whatever it stands on
+    if len(limp):
+        model.actuator_gainprm[limp, 0] = 0.0  # actuators are in joint order: no stiffness, no damping, no torque
+        model.actuator_biasprm[limp, :3] = 0.0
     return model
 
 
