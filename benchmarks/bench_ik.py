@@ -1,0 +1,173 @@
+"""The IK baseline's low level against LAT's on the same robots and action count (target: IK <= 1.5x LAT).
+
+    .venv/bin/python benchmarks/bench_ik.py                       # A1 and Daisy, about a minute
+    .venv/bin/python benchmarks/bench_ik.py --robots a1 --per-step --repeats 3
+    ./run.sh bench                                                # with the other benchmarks
+
+Two workloads per robot, each timed for both low levels, interleaved, fastest of ``--repeats``:
+
+- ``data``: CoM dynamics data, :func:`collect_transitions` of ``--robots-data x --actions`` random actions on a
+  :class:`LatentActionEnv` (the recipes' dynamics-data stage, scaled down);
+- ``eval``: an evaluation-sized closed loop, ``--robots-eval`` robots for ``--eval-actions`` chained random actions
+  (goal reaching runs 8 robots for 30 actions); the MPC call both methods make before each action is left out, so
+  the ratio is an upper bound on the evaluation stage's.
+
+LAT is a :class:`LatentLowLevel` whose gait policy is trained for a few epochs on a few experts (the speed does not
+depend on its quality: ``pi(., z)`` is one forward pass, then one ``mujoco.rollout`` call per action). IK is the
+default :class:`CommandLowLevel` (feedback once per swing phase, vectorised IK); ``--per-step`` adds the per-step
+loop with the reference IK (how the experts are recorded) for comparison.
+
+Example:
+    >>> from bench_ik import benchmark_robot  # doctest: +SKIP
+    >>> rows = benchmark_robot("a1")  # doctest: +SKIP
+    >>> [round(r.ratio, 2) for r in rows]  # doctest: +SKIP
+    [1.1, 1.3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from hierloco.components.dynamics_data import collect_transitions
+from hierloco.components.expert_library import build_expert_library
+from hierloco.components.gait_policy import train_gait_policy
+from hierloco.components.low_level import CommandLowLevel, LatentLowLevel
+from hierloco.envs import get_robot
+from hierloco.envs.batched_sim import BatchedSimulator
+from hierloco.envs.latent_env import LatentActionEnv
+from hierloco.envs.robots import CONTROL_TIMESTEP
+
+RATIO_TARGET = 1.5  # IK / LAT
+
+
+@dataclass
+class IKRow:
+    """Seconds of one workload for LAT and IK (and the per-step IK loop when measured)."""
+
+    robot: str
+    workload: str
+    robots: int
+    actions: int
+    lat_seconds: float
+    ik_seconds: float
+    per_step_seconds: float | None = None
+
+    @property
+    def ratio(self) -> float:
+        return self.ik_seconds / self.lat_seconds
+
+
+def _tiny_lat(robot, num_experts: int = 4, epochs: int = 30):
+    """A few experts (one gait period of settling) and a gait policy fitted to them for a few epochs."""
+    library = build_expert_library(robot, num_experts, seed=0, settle_time=robot.gait_period, progress=False)
+    periods = round(library.steps_per_action * CONTROL_TIMESTEP / robot.gait_period)
+    trained = train_gait_policy(library.joint_targets, periods_per_action=periods, epochs=epochs, progress=False)
+    return trained
+
+
+def _data_workload(make_low_level, robot, num_robots: int, actions: int):
+    def run():
+        env = LatentActionEnv(make_low_level(num_robots), num_robots=num_robots, seed=0)
+        collect_transitions(env, num_robots * actions, episode_length=20, seed=0, progress=False)
+        env.close()
+    return run
+
+
+def _eval_workload(make_low_level, robot, num_robots: int, actions: int):
+    def run():
+        low = make_low_level(num_robots)
+        sim = BatchedSimulator(robot, num_robots, init_joint_noise=0.02, seed=0)
+        rng = np.random.default_rng(0)
+        for _ in range(actions):
+            low.run(sim, rng.uniform(low.action_low, low.action_high, (num_robots, low.action_dim)))
+        sim.close()
+    return run
+
+
+def _interleaved_best(workloads: dict, repeats: int) -> dict[str, float]:
+    """Seconds of each workload, the fastest of ``repeats`` calls made in turn (the machine's load changes the
+    absolute numbers far more than the ratios)."""
+    best = {name: float("inf") for name in workloads}
+    for _ in range(repeats):
+        for name, fn in workloads.items():
+            start = time.perf_counter()
+            fn()
+            best[name] = min(best[name], time.perf_counter() - start)
+    return best
+
+
+def benchmark_robot(robot: str, *, data_robots: int = 100, data_actions: int = 3, eval_robots: int = 8,
+                    eval_actions: int = 10, repeats: int = 1, per_step: bool = False) -> list[IKRow]:
+    """The ``data`` and ``eval`` rows of one robot (see the module docstring)."""
+    spec = get_robot(robot)
+    trained = _tiny_lat(spec)
+    makers = {"lat": lambda b: LatentLowLevel(trained, spec), "ik": lambda b: CommandLowLevel(spec, b)}
+    if per_step:
+        makers["per_step"] = lambda b: CommandLowLevel(spec, b, feedback_steps=1, ik_solver="reference")
+    rows = []
+    for workload, make, robots, actions in (("data", _data_workload, data_robots, data_actions),
+                                            ("eval", _eval_workload, eval_robots, eval_actions)):
+        seconds = _interleaved_best({name: make(m, spec, robots, actions) for name, m in makers.items()}, repeats)
+        rows.append(IKRow(spec.name, workload, robots, actions, seconds["lat"], seconds["ik"], seconds.get("per_step")))
+    return rows
+
+
+def format_table(rows: list[IKRow]) -> str:
+    lines = [f"IK low level vs LAT's (target: IK / LAT <= {RATIO_TARGET})", "",
+             "| robot | workload | robots x actions | LAT s | IK s | IK / LAT | per-step IK s | per-step / LAT |",
+             "|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        per_step = ("-", "-") if r.per_step_seconds is None else (f"{r.per_step_seconds:.2f}",
+                                                                   f"{r.per_step_seconds / r.lat_seconds:.1f}")
+        lines.append(f"| {r.robot} | {r.workload} | {r.robots} x {r.actions} | {r.lat_seconds:.2f} | "
+                     f"{r.ik_seconds:.2f} | {r.ratio:.2f} | {per_step[0]} | {per_step[1]} |")
+    return "\n".join(lines)
+
+
+def targets_met(rows: list[IKRow]) -> bool:
+    return all(r.ratio <= RATIO_TARGET for r in rows)
+
+
+def _positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
+    return value
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--robots", nargs="+", default=["a1", "daisy"], help="registered robot names")
+    parser.add_argument("--robots-data", type=_positive_int, default=100, help="robots collecting dynamics data")
+    parser.add_argument("--actions", type=_positive_int, default=3, help="actions per robot in the data workload")
+    parser.add_argument("--robots-eval", type=_positive_int, default=8, help="robots in the evaluation workload")
+    parser.add_argument("--eval-actions", type=_positive_int, default=10, help="actions in the evaluation workload")
+    parser.add_argument("--repeats", type=_positive_int, default=1, help="timed calls of each workload")
+    parser.add_argument("--per-step", action="store_true", help="also time the per-step loop (reference IK)")
+    parser.add_argument("--check", action="store_true", help=f"exit 1 when IK / LAT exceeds {RATIO_TARGET}")
+    args = parser.parse_args(argv)
+    for name in args.robots:
+        try:
+            get_robot(name)
+        except ValueError as error:
+            parser.error(str(error))
+    rows = []
+    for name in args.robots:
+        print(f"benchmarking the IK low level on {name} ...", flush=True)
+        rows += benchmark_robot(name, data_robots=args.robots_data, data_actions=args.actions,
+                                eval_robots=args.robots_eval, eval_actions=args.eval_actions, repeats=args.repeats,
+                                per_step=args.per_step)
+    print()
+    print(format_table(rows))
+    print(f"\n({os.cpu_count()} cores; the MPC call before each evaluation action is the same for both and left out)")
+    return 1 if args.check and not targets_met(rows) else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
