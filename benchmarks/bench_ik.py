@@ -4,7 +4,7 @@
     .venv/bin/python benchmarks/bench_ik.py --robots a1 --per-step --repeats 3
     ./run.sh bench                                                # with the other benchmarks
 
-Two workloads per robot, each timed for both low levels, interleaved, fastest of ``--repeats``:
+Two workloads per robot, each timed for both low levels, interleaved, fastest of ``--repeats`` after a warm-up call:
 
 - ``data``: CoM dynamics data, :func:`collect_transitions` of ``--robots-data x --actions`` random actions on a
   :class:`LatentActionEnv` (the recipes' dynamics-data stage, scaled down);
@@ -29,10 +29,11 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-import time
 from dataclasses import dataclass
 
 import numpy as np
+from bench_sim import _interleaved_best_rates
+from bench_cli import check_robot_names, positive_int
 
 from hierloco.components.dynamics_data import collect_transitions
 from hierloco.components.expert_library import build_expert_library
@@ -71,38 +72,30 @@ def _tiny_lat(robot, num_experts: int = 4, epochs: int = 30):
     return trained
 
 
-def _data_workload(make_low_level, robot, num_robots: int, actions: int):
+def _data_workload(low_level, num_robots: int, actions: int):
+    """``collect_transitions`` of ``num_robots x actions`` random actions (the env is built outside the timing)."""
+    env = LatentActionEnv(low_level, num_robots=num_robots, seed=0)
+
     def run():
-        env = LatentActionEnv(make_low_level(num_robots), num_robots=num_robots, seed=0)
         collect_transitions(env, num_robots * actions, episode_length=20, seed=0, progress=False)
-        env.close()
     return run
 
 
-def _eval_workload(make_low_level, robot, num_robots: int, actions: int):
+def _eval_workload(low_level, num_robots: int, actions: int):
+    """``actions`` chained random actions on ``num_robots`` robots from standing, as an evaluation episode runs."""
+    sim = BatchedSimulator(low_level.robot, num_robots, init_joint_noise=0.02, seed=0)
+
     def run():
-        low = make_low_level(num_robots)
-        sim = BatchedSimulator(robot, num_robots, init_joint_noise=0.02, seed=0)
+        sim.reset()
+        low_level.reset()
         rng = np.random.default_rng(0)
         for _ in range(actions):
-            low.run(sim, rng.uniform(low.action_low, low.action_high, (num_robots, low.action_dim)))
-        sim.close()
+            low_level.run(sim, rng.uniform(low_level.action_low, low_level.action_high,
+                                           (num_robots, low_level.action_dim)))
     return run
 
 
-def _interleaved_best(workloads: dict, repeats: int) -> dict[str, float]:
-    """Seconds of each workload, the fastest of ``repeats`` calls made in turn (the machine's load changes the
-    absolute numbers far more than the ratios)."""
-    best = {name: float("inf") for name in workloads}
-    for _ in range(repeats):
-        for name, fn in workloads.items():
-            start = time.perf_counter()
-            fn()
-            best[name] = min(best[name], time.perf_counter() - start)
-    return best
-
-
-def benchmark_robot(robot: str, *, data_robots: int = 100, data_actions: int = 3, eval_robots: int = 8,
+def benchmark_robot(robot: str, *, data_robots: int = 100, data_actions: int = 2, eval_robots: int = 8,
                     eval_actions: int = 10, repeats: int = 1, per_step: bool = False) -> list[IKRow]:
     """The ``data`` and ``eval`` rows of one robot (see the module docstring)."""
     spec = get_robot(robot)
@@ -113,7 +106,10 @@ def benchmark_robot(robot: str, *, data_robots: int = 100, data_actions: int = 3
     rows = []
     for workload, make, robots, actions in (("data", _data_workload, data_robots, data_actions),
                                             ("eval", _eval_workload, eval_robots, eval_actions)):
-        seconds = _interleaved_best({name: make(m, spec, robots, actions) for name, m in makers.items()}, repeats)
+        # one "step" per call: the rates are calls per second of the fastest call, after a warm-up call each
+        rates = _interleaved_best_rates({name: (make(m(robots), robots, actions), 1) for name, m in makers.items()},
+                                        repeats)
+        seconds = {name: 1.0 / rate for name, rate in rates.items()}
         rows.append(IKRow(spec.name, workload, robots, actions, seconds["lat"], seconds["ik"], seconds.get("per_step")))
     return rows
 
@@ -134,29 +130,18 @@ def targets_met(rows: list[IKRow]) -> bool:
     return all(r.ratio <= RATIO_TARGET for r in rows)
 
 
-def _positive_int(text: str) -> int:
-    value = int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
-    return value
-
-
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--robots", nargs="+", default=["a1", "daisy"], help="registered robot names")
-    parser.add_argument("--robots-data", type=_positive_int, default=100, help="robots collecting dynamics data")
-    parser.add_argument("--actions", type=_positive_int, default=3, help="actions per robot in the data workload")
-    parser.add_argument("--robots-eval", type=_positive_int, default=8, help="robots in the evaluation workload")
-    parser.add_argument("--eval-actions", type=_positive_int, default=10, help="actions in the evaluation workload")
-    parser.add_argument("--repeats", type=_positive_int, default=1, help="timed calls of each workload")
+    parser.add_argument("--robots-data", type=positive_int, default=100, help="robots collecting dynamics data")
+    parser.add_argument("--actions", type=positive_int, default=2, help="actions per robot in the data workload")
+    parser.add_argument("--robots-eval", type=positive_int, default=8, help="robots in the evaluation workload")
+    parser.add_argument("--eval-actions", type=positive_int, default=10, help="actions in the evaluation workload")
+    parser.add_argument("--repeats", type=positive_int, default=1, help="timed calls of each workload")
     parser.add_argument("--per-step", action="store_true", help="also time the per-step loop (reference IK)")
     parser.add_argument("--check", action="store_true", help=f"exit 1 when IK / LAT exceeds {RATIO_TARGET}")
     args = parser.parse_args(argv)
-    for name in args.robots:
-        try:
-            get_robot(name)
-        except ValueError as error:
-            parser.error(str(error))
+    check_robot_names(parser, args.robots)
     rows = []
     for name in args.robots:
         print(f"benchmarking the IK low level on {name} ...", flush=True)

@@ -18,15 +18,7 @@ import sys
 import bench_ik
 import bench_planner
 import bench_sim
-
-from hierloco.envs import get_robot
-
-
-def _positive_int(text: str) -> int:
-    value = int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
-    return value
+from bench_cli import check_robot_names, positive_int as _positive_int
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -41,11 +33,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--nthread", type=_positive_int, default=os.cpu_count() or 1, help="simulation threads")
     parser.add_argument("--check", action="store_true", help="exit 1 when a target ratio is missed")
     args = parser.parse_args(argv)
-    for name in args.robots:
-        try:
-            get_robot(name)
-        except ValueError as error:
-            parser.error(str(error))
+    check_robot_names(parser, args.robots)
     return args
 
 
