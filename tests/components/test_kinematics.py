@@ -5,10 +5,26 @@ import numpy as np
 import pytest
 
 from hierloco.components.kinematics import LegKinematics
+from hierloco.envs import robot_from_mjcf
 from hierloco.envs.robots import compile_model, get_robot, joint_qpos_indices
-from tests.envs.toy_robot import make_toy_robot
+from tests.envs.toy_robot import TOY_HIPS, TOY_LINK, TOY_QUADRUPED_XML, TOY_STANDING_HEIGHT, make_toy_robot
 
-ROBOTS = {"a1": lambda: get_robot("a1"), "daisy": lambda: get_robot("daisy"), "toy": make_toy_robot}
+
+def make_tilted_robot():
+    """The toy quadruped with tilted hip axes and rotated calves: joint axes off the coordinate axes and fixed
+    rotations in the chain, for the vectorised solver's general case."""
+    xml = TOY_QUADRUPED_XML.replace('axis="0 1 0" range="-1.5 2.5"', 'axis="0.2 1 0.4" range="-1.5 2.5"')
+    xml = xml.replace(f'_calf" pos="0 0 -{TOY_LINK}"', f'_calf" pos="0.01 0 -{TOY_LINK}" quat="0.97 0.15 0.1 0.1"')
+    assert xml.count("quat=") == len(TOY_HIPS)
+    return robot_from_mjcf(xml, name="toy_tilted", base_body="torso",
+                           legs={leg: [f"{leg}_abduction", f"{leg}_hip_pitch", f"{leg}_knee"] for leg in TOY_HIPS},
+                           feet={leg: f"{leg}_toe" for leg in TOY_HIPS}, standing_pose=[0.0, 0.8, -1.6] * 4,
+                           standing_height=TOY_STANDING_HEIGHT, gait_groups=[["FR", "RL"], ["FL", "RR"]],
+                           kp=[40.0] * 12)
+
+
+ROBOTS = {"a1": lambda: get_robot("a1"), "daisy": lambda: get_robot("daisy"), "toy": make_toy_robot,
+          "tilted": make_tilted_robot}
 
 
 @pytest.fixture(params=[(robot, solver) for robot in sorted(ROBOTS) for solver in LegKinematics.SOLVERS],
