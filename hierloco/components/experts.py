@@ -33,7 +33,8 @@ Example:
     >>> out.com_state.shape
     (2, 200, 5)
     >>> fast = RaibertController("daisy", num_robots=2, ik_solver="vectorised")
-    >>> run_closed_loop(BatchedSimulator("daisy", 2), fast, commands, 200, feedback_steps=fast.swing_steps).joint_targets.shape
+    >>> out = run_closed_loop(BatchedSimulator("daisy", 2), fast, commands, 200, feedback_steps=fast.swing_steps)
+    >>> out.joint_targets.shape
     (2, 200, 18)
 """
 
@@ -125,6 +126,9 @@ class RaibertController:
             self.velocity = np.zeros((b, 2))
             self.yaw_rate = np.zeros(b)
             self.correction = np.zeros((b, 3))
+            self.previous_commands = np.zeros((b, 1, 3))  # the last chunk's commands, B x k x 3
+            # measurements a run left for the next one (B x m x 2 and B x m): see run_closed_loop
+            self.pending_velocity_local, self.pending_yaw_rate = np.zeros((b, 0, 2)), np.zeros((b, 0))
             self.frozen = False
             return
         index = np.flatnonzero(np.asarray(mask, dtype=bool))
@@ -135,6 +139,8 @@ class RaibertController:
         self.velocity[index] = 0.0
         self.yaw_rate[index] = 0.0
         self.correction[index] = 0.0
+        self.pending_velocity_local[index] = 0.0  # standing still, as after a reset
+        self.pending_yaw_rate[index] = 0.0
 
     def freeze(self, frozen: bool = True) -> None:
         """Stops (or resumes) the feedback: the filtered velocities and the integral correction are held.
@@ -169,10 +175,11 @@ class RaibertController:
         """Joint targets ``B x k x J`` (rad) for the next k control steps, from the m measurements since the last
         call.
 
-        The measurements update the velocity filter and the integral loop one by one (each against the command of
-        the first new step); the footholds of the k steps follow from that state, and all of them go through one IK
-        call, each step warm started from the previous step's solution when k = 1, else from the solution one gait
-        period earlier (the same phase of the gait).
+        The measurements update the velocity filter and the integral loop one by one, each against the command of
+        the step after the one it was measured in (the last one against the first new command); the footholds of
+        the k steps follow from that state, and all of them go through one IK call, each step warm started from the
+        previous step's solution when k = 1, else from the solution one gait period earlier (the same phase of the
+        gait).
 
         Args:
             commands: ``B x k x 3`` desired ``(vx, vy, yaw_rate)`` per step, local frame (m/s, m/s, rad/s).
@@ -192,8 +199,12 @@ class RaibertController:
                 and np.all(np.isfinite(yaw_rate))):
             raise ValueError("commands or measurements contain NaN or inf")
         if not self.frozen:
-            for i in range(velocity_local.shape[1]):
-                self._observe(commands[:, 0], velocity_local[:, i], yaw_rate[:, i])
+            # measurement i was taken at the end of the step before paired[i]'s
+            paired = np.concatenate([self.previous_commands[:, 1:], commands[:, :1]], 1)
+            m = velocity_local.shape[1]
+            for i in range(m):
+                self._observe(paired[:, max(0, paired.shape[1] - m + i)], velocity_local[:, i], yaw_rate[:, i])
+        self.previous_commands = commands
         k, legs = commands.shape[1], self.kinematics.num_legs
         feet = np.empty((b, k, legs, 3))
         for j in range(k):
@@ -250,8 +261,10 @@ def run_closed_loop(sim: BatchedSimulator, controller: RaibertController, comman
     from what it has measured so far (:meth:`RaibertController.act_chunk`), and each chunk is simulated in one call;
     chunks are aligned to the gait clock (they start on multiples of ``feedback_steps`` steps), so with one swing
     phase each touchdown point is chosen at lift-off. ``feedback_steps=1`` is the per-step loop the experts are
-    recorded with. Returns the per-step :class:`SimulationResult` with an extra attribute ``joint_targets``
-    (``B x T x J``).
+    recorded with. The first chunk observes the current state (its yaw rate unknown: 0) after the measurements
+    the previous run's last chunk left (all but its last step's, which the state repeats), so successive runs (one
+    per action) lose none. Returns the per-step :class:`SimulationResult` with an extra attribute
+    ``joint_targets`` (``B x T x J``).
     """
     commands = np.asarray(commands, dtype=np.float64)
     b = sim.num_robots
@@ -263,8 +276,10 @@ def run_closed_loop(sim: BatchedSimulator, controller: RaibertController, comman
         raise ValueError(f"feedback_steps must be a positive number of control steps, got {feedback_steps}")
     feedback_steps = int(feedback_steps)
     state = sim.com_state
-    velocity = world_to_local(state[:, 3:5], state[:, 2])[:, None]  # B x m x 2, m measurements so far
-    yaw_rate = np.zeros((b, 1))
+    # B x m x 2 and B x m: the measurements not yet observed
+    measured = world_to_local(state[:, 3:5], state[:, 2])[:, None]
+    velocity = np.concatenate([controller.pending_velocity_local, measured], 1)
+    yaw_rate = np.concatenate([controller.pending_yaw_rate, np.zeros((b, 1))], 1)
     results, targets = [], []
     n = 0
     while n < num_steps:
@@ -281,6 +296,7 @@ def run_closed_loop(sim: BatchedSimulator, controller: RaibertController, comman
         results.append(out)
         targets.append(action)
         n += k
+    controller.pending_velocity_local, controller.pending_yaw_rate = velocity[:, :-1].copy(), yaw_rate[:, :-1].copy()
     merged = SimulationResult(**{
         name: np.concatenate([getattr(r, name) for r in results], axis=1)
         for name in SimulationResult.__dataclass_fields__

@@ -122,6 +122,22 @@ def test_a_chunk_follows_the_per_step_law():
     assert chunked.step_count == stepped.step_count == k + 1
 
 
+def test_successive_runs_observe_every_step():
+    """Split into runs (one per action), the chunked loop feeds the velocity filter and the integral loop the same
+    measurements as one long run: none of the last chunk's are lost at the split."""
+    robot = get_robot("daisy")
+    commands = np.array([[0.2, 0.1, 0.0], [-0.1, 0.2, 0.0]])
+    k = 50
+    whole, split = (RaibertController(robot, 2, ik_solver="vectorised") for _ in range(2))
+    run_closed_loop(BatchedSimulator(robot, 2, seed=0), whole, commands, 150, feedback_steps=k)
+    sim = BatchedSimulator(robot, 2, seed=0)
+    first = run_closed_loop(sim, split, commands, 100, feedback_steps=k)
+    np.testing.assert_array_equal(split.pending_velocity_local, first.com_velocity_local[:, -k:-1])
+    run_closed_loop(sim, split, commands, 50, feedback_steps=k)
+    np.testing.assert_array_equal(split.velocity, whole.velocity)  # filtered over steps 0..99 in both
+    np.testing.assert_array_equal(split.correction[:, :2], whole.correction[:, :2])
+
+
 def test_feedback_once_per_swing_chains_actions_without_falling():
     """The IK low level's default: random commands chained for 4 actions on both robots, nobody falls, and each
     action moves the robots the way they were told (the sign of the commanded forward velocity)."""
