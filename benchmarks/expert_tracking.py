@@ -1,7 +1,7 @@
 """How well the expert controller tracks its commands, and how long a 50-expert library takes to build.
 
     .venv/bin/python benchmarks/expert_tracking.py [--robots a1 daisy] [--seeds 3]
-    .venv/bin/python benchmarks/expert_tracking.py --feedback-steps swing --ik-solver vectorised --skip-library
+    .venv/bin/python benchmarks/expert_tracking.py --feedback-steps auto --ik-solver vectorised --skip-library
     .venv/bin/python benchmarks/expert_tracking.py --footstep-law plain
 
 For each robot: commands (+-0.2, 0), (0, +-0.2) m/s, turns in place and two corners of the command box, run
@@ -36,7 +36,9 @@ def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--robots", nargs="+", default=["a1", "daisy"])
     parser.add_argument("--seeds", type=int, default=3)
-    parser.add_argument("--feedback-steps", default="1", help="control steps per feedback update, or 'swing'")
+    parser.add_argument("--feedback-steps", default="1",
+                        help="control steps per feedback update, 'swing' (one swing phase) or 'auto' (the IK low "
+                             "level's default, a swing phase split into parts of at most 0.25 s)")
     parser.add_argument("--footstep-law", default="integral", choices=["integral", "plain"])
     parser.add_argument("--ik-solver", default="reference", choices=["reference", "vectorised"])
     parser.add_argument("--skip-library", action="store_true", help="do not time a 50-expert library build")
@@ -53,7 +55,8 @@ def main(argv=None) -> None:
             sim = BatchedSimulator(robot, len(commands), init_joint_noise=0.05, seed=seed)
             controller = RaibertController(robot, len(commands), footstep_law=args.footstep_law,
                                            ik_solver=args.ik_solver)
-            feedback = controller.swing_steps if args.feedback_steps == "swing" else int(args.feedback_steps)
+            feedback = {"swing": controller.swing_steps, "auto": controller.swing_chunk_steps()}.get(
+                args.feedback_steps) or int(args.feedback_steps)
             out = run_closed_loop(sim, controller, commands, SETTLE_STEPS + MEASURE_STEPS, ramp_steps=100,
                                   feedback_steps=feedback)
             fell |= out.failed.any(1)

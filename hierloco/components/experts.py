@@ -150,6 +150,16 @@ class RaibertController:
         """
         self.frozen = frozen
 
+    def swing_chunk_steps(self, max_seconds: float = 0.25) -> int:
+        """Control steps in the longest equal split of a swing phase that lasts at most ``max_seconds`` (the whole
+        swing phase when it is short enough): the IK low level's default feedback interval."""
+        if max_seconds <= 0:
+            raise ValueError(f"max_seconds must be positive, got {max_seconds}")
+        for parts in range(1, self.swing_steps + 1):
+            if self.swing_steps % parts == 0 and self.swing_steps // parts * self.dt <= max_seconds + 1e-9:
+                return self.swing_steps // parts
+        return 1
+
     def swing_progress(self, step: int | None = None) -> np.ndarray:
         """``L`` swing progress in (0, 1] of each leg at control step ``step`` (0 for a leg in stance)."""
         step = self.step_count if step is None else step

@@ -131,16 +131,19 @@ class CommandLowLevel(LowLevel):
     """IK: the Raibert controller tracks a desired ``(vx, vy, yaw_rate)`` for one action, closed loop.
 
     The controller keeps its gait clock and feet across actions, so successive commands chain smoothly. By default
-    it re-plans once per swing phase (the touchdown point chosen at lift-off, as in Raibert's controller) and each
-    swing phase costs one vectorised IK call and one simulator call; ``feedback_steps=1, ik_solver="reference"`` is
-    the per-step loop the experts are recorded with.
+    it re-plans once per swing phase, or per half of it when that phase is longer than 0.25 s (A1: every 10 control
+    steps, the touchdown point chosen at lift-off as in Raibert's controller; Daisy: every 25), and each interval
+    costs one vectorised IK call and one simulator call; it tracks its commands as well as the per-step loop
+    (``benchmarks/expert_tracking.py``). ``feedback_steps=1, ik_solver="reference"`` is the per-step loop the
+    experts are recorded with.
 
     Args:
         robot: a registered name or a :class:`RobotSpec`.
         num_robots: B.
         steps_per_action: N control steps per command.
         command_low, command_high: the command box ``(vx, vy, yaw_rate)`` (default: the robot's).
-        feedback_steps: control steps between feedback updates (default: one swing phase).
+        feedback_steps: control steps between feedback updates (default:
+            :meth:`RaibertController.swing_chunk_steps`, a swing phase split into parts of at most 0.25 s).
         footstep_law: ``"integral"`` or ``"plain"`` (see :class:`RaibertController`).
         ik_solver: ``"vectorised"`` or ``"reference"`` (see :class:`LegKinematics`).
         **controller_kwargs: the other :class:`RaibertController` options (gains, gait period, ...).
@@ -162,7 +165,7 @@ class CommandLowLevel(LowLevel):
             raise ValueError(f"steps_per_action must be positive, got {steps_per_action}")
         self.controller = RaibertController(self.robot, num_robots, footstep_law=footstep_law, ik_solver=ik_solver,
                                             **controller_kwargs)
-        self.feedback_steps = int(self.controller.swing_steps if feedback_steps is None else feedback_steps)
+        self.feedback_steps = int(self.controller.swing_chunk_steps() if feedback_steps is None else feedback_steps)
         if self.feedback_steps < 1:
             raise ValueError(f"feedback_steps must be a positive number of control steps, got {feedback_steps}")
         self.action_low = np.asarray(self.robot.command_low if command_low is None else command_low, float)

@@ -28,7 +28,7 @@ def _achieved(robot, commands, seed, feedback_steps=1, **controller_kwargs):
     """Mean ``(vx, vy, yaw_rate)`` over 5 s after 2 s of settling, closed loop from standing; fails on a fall."""
     sim = BatchedSimulator(robot, len(commands), init_joint_noise=0.05, seed=seed)
     controller = RaibertController(robot, len(commands), **controller_kwargs)
-    feedback = controller.swing_steps if feedback_steps == "swing" else feedback_steps
+    feedback = controller.swing_chunk_steps() if feedback_steps == "chunk" else feedback_steps
     out = run_closed_loop(sim, controller, commands, SETTLE_STEPS + MEASURE_STEPS, ramp_steps=100,
                           feedback_steps=feedback)
     assert not out.failed.any(), f"fell or blew up: commands {commands[out.failed[:, -1]]}"
@@ -38,7 +38,7 @@ def _achieved(robot, commands, seed, feedback_steps=1, **controller_kwargs):
 
 
 # (feedback_steps, controller options): the experts' per-step loop, and the IK low level's default fast path
-PATHS = {"per_step": (1, {}), "swing_vectorised": ("swing", {"ik_solver": "vectorised"})}
+PATHS = {"per_step": (1, {}), "chunked_vectorised": ("chunk", {"ik_solver": "vectorised"})}
 
 
 @pytest.mark.parametrize("path", sorted(PATHS))
@@ -59,7 +59,7 @@ def test_plain_footstep_law_tracks_on_daisy():
     """The paper's law alone (no integral loop) walks the statically stable hexapod at its commands."""
     robot = get_robot("daisy")
     commands = _commands(robot)
-    achieved = _achieved(robot, commands, 0, "swing", footstep_law="plain", ik_solver="vectorised")
+    achieved = _achieved(robot, commands, 0, "chunk", footstep_law="plain", ik_solver="vectorised")
     tolerance = np.maximum(0.05, 0.25 * np.abs(commands))
     assert np.all(np.abs(achieved - commands) <= tolerance), achieved.round(3)
 
@@ -69,8 +69,8 @@ def test_integral_loop_removes_most_of_the_plain_laws_error_on_a1():
     per-command error at least four-fold."""
     robot = get_robot("a1")
     commands = _commands(robot)
-    plain = np.abs(_achieved(robot, commands, 0, "swing", footstep_law="plain", ik_solver="vectorised") - commands)
-    integral = np.abs(_achieved(robot, commands, 0, "swing", ik_solver="vectorised") - commands)
+    plain = np.abs(_achieved(robot, commands, 0, "chunk", footstep_law="plain", ik_solver="vectorised") - commands)
+    integral = np.abs(_achieved(robot, commands, 0, "chunk", ik_solver="vectorised") - commands)
     assert integral.max(1).mean() * 4 <= plain.max(1).mean(), (integral.max(1), plain.max(1))
 
 
@@ -138,12 +138,23 @@ def test_successive_runs_observe_every_step():
     np.testing.assert_array_equal(split.correction[:, :2], whole.correction[:, :2])
 
 
-def test_feedback_once_per_swing_chains_actions_without_falling():
+def test_default_feedback_interval_is_a_swing_phase_of_at_most_a_quarter_second():
+    assert RaibertController("a1", 1).swing_chunk_steps() == 10  # 0.1 s swing: the whole of it
+    assert RaibertController("daisy", 1).swing_chunk_steps() == 25  # 0.5 s swing: halves
+    assert RaibertController("daisy", 1).swing_chunk_steps(0.1) == 10
+    assert RaibertController("daisy", 1).swing_chunk_steps(1.0) == 50
+    assert RaibertController("a1", 1).swing_chunk_steps(0.001) == 1
+    with pytest.raises(ValueError, match="max_seconds"):
+        RaibertController("a1", 1).swing_chunk_steps(0.0)
+
+
+def test_default_fast_path_chains_actions_without_falling():
     """The IK low level's default: random commands chained for 4 actions on both robots, nobody falls, and each
     action moves the robots the way they were told (the sign of the commanded forward velocity)."""
     for name in ("a1", "daisy"):
         low = CommandLowLevel(name, 6)
-        assert low.feedback_steps == low.controller.swing_steps and low.controller.kinematics.solver == "vectorised"
+        assert low.feedback_steps == low.controller.swing_chunk_steps()
+        assert low.controller.kinematics.solver == "vectorised"
         sim = BatchedSimulator(name, 6, init_joint_noise=0.02, seed=0)
         rng = np.random.default_rng(0)
         for _ in range(4):
