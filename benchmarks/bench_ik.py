@@ -12,6 +12,10 @@ Two workloads per robot, each timed for both low levels, interleaved, fastest of
   (goal reaching runs 8 robots for 30 actions); the MPC call both methods make before each action is left out, so
   the ratio is an upper bound on the evaluation stage's.
 
+A third table times the IK solvers alone (:class:`LegKinematics` ``"reference"`` vs ``"vectorised"``) on the foot
+targets of one IK action (``--robots-data`` robots), solved in chunks of the low level's feedback interval, each
+chunk warm started from the pose before it.
+
 LAT is a :class:`LatentLowLevel` whose gait policy is trained for a few epochs on a few experts (the speed does not
 depend on its quality: ``pi(., z)`` is one forward pass, then one ``mujoco.rollout`` call per action). IK is the
 default :class:`CommandLowLevel` (feedback once per swing phase, vectorised IK); ``--per-step`` adds the per-step
@@ -38,6 +42,7 @@ from bench_cli import check_robot_names, positive_int
 from hierloco.components.dynamics_data import collect_transitions
 from hierloco.components.expert_library import build_expert_library
 from hierloco.components.gait_policy import train_gait_policy
+from hierloco.components.kinematics import LegKinematics
 from hierloco.components.low_level import CommandLowLevel, LatentLowLevel
 from hierloco.envs import get_robot
 from hierloco.envs.batched_sim import BatchedSimulator
@@ -114,6 +119,50 @@ def benchmark_robot(robot: str, *, data_robots: int = 100, data_actions: int = 2
     return rows
 
 
+@dataclass
+class SolverRow:
+    """Milliseconds per control step of the two IK solvers on the same ``robots x chunk x L`` foot batches."""
+
+    robot: str
+    robots: int
+    chunk: int
+    reference_ms: float
+    vectorised_ms: float
+
+    @property
+    def speedup(self) -> float:
+        return self.reference_ms / self.vectorised_ms
+
+
+def benchmark_solvers(robot: str, *, num_robots: int = 100, repeats: int = 1) -> SolverRow:
+    """The IK solvers on the feet of one action of the IK low level (see the module docstring)."""
+    spec = get_robot(robot)
+    low = CommandLowLevel(spec, num_robots)
+    sim = BatchedSimulator(spec, num_robots, seed=0)
+    rng = np.random.default_rng(0)
+    poses = low.run(sim, rng.uniform(low.action_low, low.action_high, (num_robots, 3))).joint_targets  # B x N x J
+    sim.close()
+    k = low.feedback_steps
+    solvers = {name: LegKinematics(spec, solver=name) for name in LegKinematics.SOLVERS}
+    feet = solvers["reference"].forward(poses)  # B x N x L x 3, reachable
+
+    def solve(kinematics):
+        def run():
+            for start in range(1, poses.shape[1] - k + 1, k):
+                kinematics.inverse(feet[:, start:start + k], np.repeat(poses[:, start - 1:start], k, 1))
+        return run
+    steps = (poses.shape[1] - 1) // k * k
+    rates = _interleaved_best_rates({name: (solve(kin), steps) for name, kin in solvers.items()}, repeats)
+    return SolverRow(spec.name, num_robots, k, 1000 / rates["reference"], 1000 / rates["vectorised"])
+
+
+def format_solver_table(rows: list[SolverRow]) -> str:
+    lines = ["| robot | robots x chunk | reference ms / step | vectorised ms / step | speed-up |", "|---|---|---|---|---|"]
+    lines += [f"| {r.robot} | {r.robots} x {r.chunk} | {r.reference_ms:.2f} | {r.vectorised_ms:.2f} | {r.speedup:.1f}x |"
+              for r in rows]
+    return "\n".join(lines)
+
+
 def format_table(rows: list[IKRow]) -> str:
     lines = [f"IK low level vs LAT's (target: IK / LAT <= {RATIO_TARGET})", "",
              "| robot | workload | robots x actions | LAT s | IK s | IK / LAT | per-step IK s | per-step / LAT |",
@@ -142,14 +191,17 @@ def main(argv=None) -> int:
     parser.add_argument("--check", action="store_true", help=f"exit 1 when IK / LAT exceeds {RATIO_TARGET}")
     args = parser.parse_args(argv)
     check_robot_names(parser, args.robots)
-    rows = []
+    rows, solver_rows = [], []
     for name in args.robots:
         print(f"benchmarking the IK low level on {name} ...", flush=True)
         rows += benchmark_robot(name, data_robots=args.robots_data, data_actions=args.actions,
                                 eval_robots=args.robots_eval, eval_actions=args.eval_actions, repeats=args.repeats,
                                 per_step=args.per_step)
+        solver_rows.append(benchmark_solvers(name, num_robots=args.robots_data, repeats=args.repeats))
     print()
     print(format_table(rows))
+    print()
+    print(format_solver_table(solver_rows))
     print(f"\n({os.cpu_count()} cores; the MPC call before each evaluation action is the same for both and left out)")
     return 1 if args.check and not targets_met(rows) else 0
 

@@ -1,4 +1,4 @@
-"""The expert controller: a Raibert-style footstep law with leg inverse kinematics (Li et al., RA-L 2021, Sec. IV).
+"""The expert controller: a Raibert-style footstep law with leg inverse kinematics (Li et al., RA-L 2021, Sec. III).
 
 A desired CoM velocity ``(vx, vy, yaw_rate)`` in the robot's local (yaw) frame becomes footsteps and then joint
 targets, closed loop on the measured CoM velocity, batched over B robots that share one gait clock:

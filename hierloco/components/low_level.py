@@ -128,7 +128,8 @@ class ExpertReplayLowLevel(LowLevel):
 
 
 class CommandLowLevel(LowLevel):
-    """IK: the Raibert controller tracks a desired ``(vx, vy, yaw_rate)`` for one action, closed loop.
+    """IK (Li et al., RA-L 2021, Sec. IV): the Raibert controller tracks a desired ``(vx, vy, yaw_rate)`` for one
+    action, closed loop.
 
     The controller keeps its gait clock and feet across actions, so successive commands chain smoothly. By default
     it re-plans once per swing phase, or per half of it when that phase is longer than 0.25 s (A1: every 10 control
