@@ -21,7 +21,9 @@ The feedback can be applied every control step (``feedback_steps=1`` in :func:`r
 are recorded) or every k steps: the controller then plans k steps of footholds from the state measured so far, turns
 all ``B x k x L`` of them into joint targets in one vectorised IK call and the simulator runs the k steps in one
 ``mujoco.rollout`` call. With ``k`` = one swing phase this is the classic Raibert controller, which chooses the
-touchdown point at lift-off; the measurements of every step still reach the velocity filter and the integral loop.
+touchdown point at lift-off (the IK low level's default splits swing phases longer than 0.25 s,
+:meth:`RaibertController.swing_chunk_steps`); the measurements of every step still reach the velocity filter and
+the integral loop.
 
 Example:
     >>> import numpy as np
@@ -139,8 +141,9 @@ class RaibertController:
         self.velocity[index] = 0.0
         self.yaw_rate[index] = 0.0
         self.correction[index] = 0.0
-        self.pending_velocity_local[index] = 0.0  # standing still, as after a reset
+        self.pending_velocity_local[index] = 0.0  # standing still, as after a reset: no error to integrate
         self.pending_yaw_rate[index] = 0.0
+        self.previous_commands[index] = 0.0
 
     def freeze(self, frozen: bool = True) -> None:
         """Stops (or resumes) the feedback: the filtered velocities and the integral correction are held.
@@ -214,7 +217,7 @@ class RaibertController:
             m = velocity_local.shape[1]
             for i in range(m):
                 self._observe(paired[:, max(0, paired.shape[1] - m + i)], velocity_local[:, i], yaw_rate[:, i])
-        self.previous_commands = commands
+        self.previous_commands = commands.copy()
         k, legs = commands.shape[1], self.kinematics.num_legs
         feet = np.empty((b, k, legs, 3))
         for j in range(k):
