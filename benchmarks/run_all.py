@@ -6,7 +6,8 @@ on this machine.
     ./run.sh bench --check                          # exit 1 when a target ratio is missed
 
 Simulation: batched simulator vs native mujoco.rollout vs a naive TorchRL loop. Planning: one MPC call vs the bare
-model forward pass. LAT end to end at paper scale is timed by the recipe itself (report.json, stage_seconds).
+model forward pass. The IK baseline's low level vs LAT's (dynamics data and an evaluation-sized closed loop). LAT
+end to end at paper scale is timed by the recipe itself (report.json, stage_seconds).
 """
 
 from __future__ import annotations
@@ -15,17 +16,10 @@ import argparse
 import os
 import sys
 
+import bench_ik
 import bench_planner
 import bench_sim
-
-from hierloco.envs import get_robot
-
-
-def _positive_int(text: str) -> int:
-    value = int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
-    return value
+from bench_cli import check_robot_names, positive_int as _positive_int
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -40,11 +34,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--nthread", type=_positive_int, default=os.cpu_count() or 1, help="simulation threads")
     parser.add_argument("--check", action="store_true", help="exit 1 when a target ratio is missed")
     args = parser.parse_args(argv)
-    for name in args.robots:
-        try:
-            get_robot(name)
-        except ValueError as error:
-            parser.error(str(error))
+    check_robot_names(parser, args.robots)
     return args
 
 
@@ -62,7 +52,12 @@ def main(argv=None) -> int:
     planner_rows = [bench_planner.benchmark_planner(robots=1), bench_planner.benchmark_planner(robots=8)]
     print()
     print(bench_planner.format_table(planner_rows))
-    if args.check and (not bench_sim.targets_met(rows) or any(r.ratio > 2.0 for r in planner_rows)):
+    print("\nbenchmarking the IK low level against LAT's ...", flush=True)
+    ik_rows = [row for name in args.robots for row in bench_ik.benchmark_robot(name)]
+    print()
+    print(bench_ik.format_table(ik_rows))
+    if args.check and (not bench_sim.targets_met(rows) or any(r.ratio > 2.0 for r in planner_rows)
+                       or not bench_ik.targets_met(ik_rows)):
         return 1
     return 0
 

@@ -86,26 +86,60 @@ class ExpertReplayLowLevel(LowLevel):
 
 
 class CommandLowLevel(LowLevel):
-    """IK: the Raibert controller tracks a desired ``(vx, vy, yaw_rate)`` for one action, closed loop.
+    """IK (Li et al., RA-L 2021, Sec. IV): the Raibert controller tracks a desired ``(vx, vy, yaw_rate)`` for one
+    action, closed loop.
 
-    The controller keeps its gait clock and feet across actions, so successive commands chain smoothly.
+    The controller keeps its gait clock and feet across actions, so successive commands chain smoothly. By default
+    it re-plans once per swing phase, or per half of it when that phase is longer than 0.25 s (A1: every 10 control
+    steps, the touchdown point chosen at lift-off as in Raibert's controller; Daisy: every 25), and each interval
+    costs one vectorised IK call and one simulator call; it tracks its commands as well as the per-step loop
+    (``benchmarks/expert_tracking.py``). ``feedback_steps=1, ik_solver="reference"`` is the per-step loop the
+    experts are recorded with.
+
+    Args:
+        robot: a registered name or a :class:`RobotSpec`.
+        num_robots: B.
+        steps_per_action: N control steps per command.
+        command_low, command_high: the command box ``(vx, vy, yaw_rate)`` (default: the robot's).
+        feedback_steps: control steps between feedback updates (default:
+            :meth:`RaibertController.swing_chunk_steps`, a swing phase split into parts of at most 0.25 s).
+        footstep_law: ``"integral"`` or ``"plain"`` (see :class:`RaibertController`).
+        ik_solver: ``"vectorised"`` or ``"reference"`` (see :class:`LegKinematics`).
+        **controller_kwargs: the other :class:`RaibertController` options (gains, gait period, ...).
+
+    Example:
+        >>> low = CommandLowLevel("a1", num_robots=2)
+        >>> low.run(BatchedSimulator("a1", 2), np.array([[0.2, 0.0, 0.0], [0.0, 0.1, 0.2]])).joint_targets.shape
+        (2, 100, 12)
     """
 
     kind = "command"
 
     def __init__(self, robot: str | RobotSpec, num_robots: int, steps_per_action: int = 100,
-                 command_low=None, command_high=None, **controller_kwargs):
+                 command_low=None, command_high=None, *, feedback_steps: int | None = None,
+                 footstep_law: str = "integral", ik_solver: str = "vectorised", **controller_kwargs):
         self.robot = get_robot(robot)
         self.steps_per_action = int(steps_per_action)
-        self.controller = RaibertController(self.robot, num_robots, **controller_kwargs)
+        if self.steps_per_action < 1:
+            raise ValueError(f"steps_per_action must be positive, got {steps_per_action}")
+        self.controller = RaibertController(self.robot, num_robots, footstep_law=footstep_law, ik_solver=ik_solver,
+                                            **controller_kwargs)
+        self.feedback_steps = int(self.controller.swing_chunk_steps() if feedback_steps is None else feedback_steps)
+        if self.feedback_steps < 1:
+            raise ValueError(f"feedback_steps must be a positive number of control steps, got {feedback_steps}")
         self.action_low = np.asarray(self.robot.command_low if command_low is None else command_low, float)
         self.action_high = np.asarray(self.robot.command_high if command_high is None else command_high, float)
 
     def reset(self, mask=None):
         self.controller.reset(mask)
 
+    def describe(self) -> dict:
+        return {**super().describe(), "feedback_steps": self.feedback_steps,
+                "footstep_law": self.controller.footstep_law, "ik_solver": self.controller.kinematics.solver}
+
     def run(self, sim, actions):
         if sim.num_robots != self.controller.num_robots:
             raise ValueError(f"controller built for {self.controller.num_robots} robots, simulator has "
                              f"{sim.num_robots}")
-        return run_closed_loop(sim, self.controller, self._check(sim, actions), self.steps_per_action)
+        return run_closed_loop(sim, self.controller, self._check(sim, actions), self.steps_per_action,
+                               feedback_steps=self.feedback_steps)
