@@ -13,17 +13,23 @@ METHOD = "ik"
 
 def checks(c: config.Checker, robot) -> None:
     from hierloco.components.experts import RaibertController
+    from hierloco.components.low_level import CommandLowLevel
 
     config.check_experts(c, robot, library=False)
     config.check_dynamics(c)
     config.check_planner(c, CONTINUOUS_PLANNERS)
     config.check_eval(c)
     config.check_logger(c)
-    accepted = [p for p in inspect.signature(RaibertController.__init__).parameters
-                if p not in ("self", "robot", "num_robots")]
-    for option in c.cfg.controller:
-        if option not in accepted:
-            c.fail(f"controller has no option {option!r} (its options: {', '.join(accepted)})")
+    accepted = [p for cls in (CommandLowLevel, RaibertController) for p in inspect.signature(cls.__init__).parameters
+                if p not in ("self", "robot", "num_robots", "steps_per_action", "controller_kwargs")]
+    unknown = [option for option in c.cfg.controller if option not in accepted]
+    for option in unknown:
+        c.fail(f"controller has no option {option!r} (its options: {', '.join(accepted)})")
+    if robot is not None and not unknown:
+        try:  # the controller checks its own values
+            CommandLowLevel(robot, 1, c.cfg.steps_per_action, **config.section(c.cfg, "controller"))
+        except (TypeError, ValueError) as error:
+            c.fail(f"controller: {error}")
 
 
 def low_level_key(cfg, robot) -> dict:
