@@ -203,6 +203,37 @@ def plot_ablations(results: dict, path: str | os.PathLike, *, title: str | None 
     save_figure(fig, path)
 
 
+def plot_samples(rows: Sequence[dict], path: str | os.PathLike, *, tasks: Sequence[str] = ("velocity_tracking",
+                 "goal_reaching"), title: str | None = None) -> None:
+    """Normalised cost (mean +- std over targets and seeds) against the number of dynamics samples, one line per
+    method and task, one panel per robot, from per-episode rows that carry a ``samples`` column."""
+    robots = sorted({r["robot"] for r in rows})
+    if not robots:
+        raise ValueError("no result rows to plot")
+    fig, axes = plt.subplots(1, len(robots), figsize=(5.5 * len(robots), 4), squeeze=False)
+    for ax, robot in zip(axes[0], robots):
+        for method in sorted({r["method"] for r in rows if r["robot"] == robot}):
+            for task, style in zip(tasks, ("-o", "--s", ":^")):
+                points = sorted({int(r["samples"]) for r in rows if (r["robot"], r["method"], r["task"]) ==
+                                 (robot, method, task)})
+                if not points:
+                    continue
+                values = [[r["normalized_cost"] for r in rows if (r["robot"], r["method"], r["task"],
+                                                                   int(r["samples"])) == (robot, method, task, n)]
+                          for n in points]
+                ax.errorbar(points, [np.mean(v) for v in values], yerr=[np.std(v) for v in values], fmt=style,
+                            capsize=3, label=f"{method.upper()} {task.replace('_', ' ')}")
+        ax.set_xscale("log")
+        ax.set_xlabel("dynamics samples after damage")
+        ax.set_ylabel("normalised cost (lower is better)")
+        ax.axhline(1.0, color="k", lw=0.8, ls=":")
+        ax.set_title(robot)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.suptitle(title or "cost against dynamics samples")
+    save_figure(fig, path)
+
+
 def plot_navigation(arena, planned_path: np.ndarray, com_path: np.ndarray | None, path: str | os.PathLike, *,
                     inflation: float | None = None, title: str | None = None) -> None:
     """Top view of a navigation arena: obstacles (and their inflation), the planned path and the CoM path."""

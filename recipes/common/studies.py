@@ -19,6 +19,7 @@ from __future__ import annotations
 import io
 import json
 import os
+import shutil
 import subprocess
 import sys
 import tarfile
@@ -44,6 +45,8 @@ class Job:
     overrides: list[str]
     cores: int = 1
     labels: dict = field(default_factory=dict)  # added to every result row (e.g. the ablation value)
+    reuse_from: str | None = None  # another run directory whose finished stages ``reuse_stages`` this job starts from
+    reuse_stages: tuple = ()
 
     def command(self) -> list[str]:
         return [sys.executable, str(RECIPES / self.method / "train.py"), f"run_dir={self.run_dir}",
@@ -63,6 +66,22 @@ class JobResult:
     error: str = ""
 
 
+def resolve_method(name: str, variants) -> tuple[str, list[str]]:
+    """A study's method: a recipe name, or a variant ``{recipe: ..., overrides: [...]}`` (e.g. ``ik_plain``: the IK
+    recipe with the paper's plain footstep law); returns the recipe and the variant's overrides."""
+    variants = variants or {}
+    if name in variants:
+        variant = variants[name]
+        recipe = variant.get("recipe")
+        if recipe not in METHODS:
+            raise ValueError(f"variant {name!r} names no recipe (recipe: one of {', '.join(METHODS)})")
+        return recipe, list(variant.get("overrides", []))
+    if name not in METHODS:
+        raise ValueError(f"unknown method {name!r} (recipes: {', '.join(METHODS)}; variants: "
+                         f"{', '.join(variants) or 'none'})")
+    return name, []
+
+
 def finished(job: Job) -> bool:
     """Whether ``job`` already finished in its run directory with the same method and overrides."""
     marker = Path(job.run_dir) / DONE
@@ -78,6 +97,8 @@ def execute(job: Job, fetch_run_dir: bool = False) -> dict:
     """Runs one job here (in a subprocess); returns its outcome, its result rows and optionally its run directory
     as a tar archive. This is the body of the Ray task."""
     start = time.perf_counter()
+    if job.reuse_from:
+        _reuse_stages(Path(job.reuse_from), Path(job.run_dir), job.reuse_stages)
     env = {**os.environ, "OMP_NUM_THREADS": str(job.cores), "MKL_NUM_THREADS": str(job.cores),
            "WANDB_SILENT": "true"}
     log = Path(job.run_dir).parent / f"{Path(job.run_dir).name}.log"
@@ -97,6 +118,17 @@ def execute(job: Job, fetch_run_dir: bool = False) -> dict:
             archive.add(job.run_dir, arcname=".")
         outcome["archive"] = buffer.getvalue()
     return outcome
+
+
+def _reuse_stages(source: Path, target: Path, stages) -> None:
+    """Copies the finished ``stages`` of run directory ``source`` (artifact and key) that ``target`` lacks; the
+    recipe then checks their keys like any cached stage."""
+    if not source.is_dir():
+        return
+    target.mkdir(parents=True, exist_ok=True)
+    for path in source.iterdir():
+        if path.is_file() and path.name.split(".")[0] in stages and not (target / path.name).exists():
+            shutil.copyfile(path, target / path.name)
 
 
 def _progress(done: int, running: int, failed: int, pending: int, start: float, durations: list[float],
@@ -199,5 +231,5 @@ def run_here(job: Job) -> list[dict]:
     return outcome["rows"]
 
 
-__all__ = ["DONE", "METHODS", "Job", "JobResult", "execute", "finished", "report_failures", "rows_of", "run_here",
-           "run_jobs"]
+__all__ = ["DONE", "METHODS", "Job", "JobResult", "execute", "finished", "report_failures", "resolve_method", "rows_of",
+           "run_here", "run_jobs"]

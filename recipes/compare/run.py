@@ -26,8 +26,12 @@ def check(cfg) -> list:
     from hierloco.envs.robots import get_robot
 
     as_lists(cfg, ("methods", "robots", "seeds", "settings", "adverse_methods", "overrides"))
-    problems = [f"unknown method {m!r} (recipes: {', '.join(studies.METHODS)})" for m in cfg.methods
-                if m not in studies.METHODS]
+    problems = []
+    for method in cfg.methods:
+        try:
+            studies.resolve_method(method, cfg.variants)
+        except ValueError as error:
+            problems.append(str(error))
     robots = []
     for robot in cfg.robots:
         try:
@@ -53,12 +57,13 @@ def jobs(cfg, robots) -> list:
             settings = [s for s in cfg.settings if s == "normal" or method in cfg.adverse_methods]
             if not settings:
                 continue
+            recipe, variant = studies.resolve_method(method, cfg.variants)
             for seed in cfg.seeds:
                 run_dir = Path("outputs") / method / cfg.preset_name / f"{spec.name}_seed{seed}"
                 overrides = [f"preset={cfg.preset_name}", f"robot={spec.reference}", f"seed={seed}",
-                             f"settings=[{','.join(settings)}]", "progress=false", *cfg.overrides,
+                             f"settings=[{','.join(settings)}]", "progress=false", *variant, *cfg.overrides,
                              *cfg.method_overrides.get(method, [])]
-                planned.append(studies.Job(method, str(run_dir), overrides))
+                planned.append(studies.Job(recipe, str(run_dir), overrides, labels={"method": method}))
     return planned
 
 

@@ -1,0 +1,159 @@
+"""Damage and transfer (Li et al., RA-L 2021, Sec. IV-C): LAT against IK under fault models and actuator profiles,
+and few-sample re-learning of the dynamics after damage, as jobs on Ray.
+
+    python recipes/adverse/run.py                          # both robots, 3 seeds, paper scale
+    python recipes/adverse/run.py robots=[a1] seeds=[0] preset=small samples=[500,2000]
+
+Writes ``adverse.csv``, ``adverse.md`` (the table, with the speeds each fault leaves the robot: from the random-action
+dynamics data), ``samples.csv``, ``samples.png`` (cost against re-learning samples), ``wallclock.md``, and copies
+LAT's goal-reaching video under every fault to ``videos/``, in ``out_dir``.
+"""
+
+import hierloco  # noqa: F401  (first: headless MuJoCo rendering is set before anything loads MuJoCo)
+
+import shutil
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from hierloco.components.com_model import local_transition
+from hierloco.components.dynamics_data import TransitionData
+from hierloco.io import write_text
+from hierloco.plots import plot_samples
+from hierloco.results import EPISODE_COLUMNS, csv_text, markdown_table
+from recipes.common import studies
+from recipes.common.config import ConfigError, SETTINGS, as_lists
+from recipes.common.entry import recipe_main
+
+TRAINING = ("experts", "gait_policy", "gait_policy_check")  # LAT's low level, reused by the few-sample runs
+
+
+def check(cfg) -> list:
+    from hierloco.envs.robots import get_robot
+    from hierloco.envs.robots.profiles import PROFILES
+
+    as_lists(cfg, ("robots", "seeds", "methods", "samples", "sample_methods", "overrides"))
+    problems, robots = [], []
+    for robot in cfg.robots:
+        try:
+            robots.append(get_robot(robot))
+        except (ValueError, OSError) as error:
+            problems.append(str(error))
+    for method in [*cfg.methods, *cfg.sample_methods]:
+        try:
+            studies.resolve_method(method, cfg.variants)
+        except ValueError as error:
+            problems.append(str(error))
+    for profile, settings in cfg.faults.items():
+        if profile not in PROFILES:
+            problems.append(f"unknown robot profile {profile!r} in faults (profiles: {', '.join(PROFILES)})")
+        problems += [f"unknown setting {s!r} in faults.{profile} (settings: {', '.join(SETTINGS)})" for s in settings
+                     if s not in SETTINGS]
+    problems += [f"samples must be integers >= 10, got {n!r}" for n in cfg.samples if not (isinstance(n, int) and
+                                                                                           n >= 10)]
+    if problems:
+        raise ConfigError("bad config: " + "; ".join(problems))
+    return robots
+
+
+def run_dir(method: str, preset: str, robot, profile: str, seed: int) -> Path:
+    name = robot.name if profile == "own" else f"{robot.name}-{profile}"
+    return Path("outputs") / method / preset / f"{name}_seed{seed}"
+
+
+def fault_jobs(cfg, robots) -> list:
+    jobs = []
+    for robot, spec in zip(cfg.robots, robots):
+        for method in cfg.methods:
+            recipe, variant = studies.resolve_method(method, cfg.variants)
+            for profile, settings in cfg.faults.items():
+                for seed in cfg.seeds:
+                    overrides = [f"preset={cfg.preset_name}", f"robot={spec.reference}", f"seed={seed}",
+                                 f"robot_profile={profile}", f"settings=[{','.join(settings)}]", "progress=false",
+                                 *variant, *cfg.overrides]
+                    jobs.append(studies.Job(recipe, str(run_dir(method, cfg.preset_name, spec, profile, seed)),
+                                            overrides, labels={"method": method, "profile": profile}))
+    return jobs
+
+
+def sample_jobs(cfg, robots) -> list:
+    jobs = []
+    for robot, spec in zip(cfg.robots, robots):
+        for method in cfg.sample_methods:
+            recipe, variant = studies.resolve_method(method, cfg.variants)
+            for seed in cfg.seeds:
+                source = run_dir(method, cfg.preset_name, spec, "own", seed)
+                for count in cfg.samples:
+                    target = Path(cfg.out_dir) / "samples" / method / f"{spec.name}_seed{seed}_n{count}"
+                    overrides = [f"preset={cfg.preset_name}", f"robot={spec.reference}", f"seed={seed}",
+                                 "settings=[legs_disabled]", f"dynamics.num_transitions={count}", "progress=false",
+                                 "eval.videos=[]", *variant, *cfg.overrides]
+                    jobs.append(studies.Job(recipe, str(target), overrides, labels={"method": method,
+                                                                                    "samples": count},
+                                            reuse_from=str(source), reuse_stages=TRAINING))
+    return jobs
+
+
+def achievable_speeds(results) -> str:
+    """Per robot, profile and fault, what the robot can still do: the 95th percentile of its speed in each
+    direction over the random-action dynamics data (m/s, in the local frame at the start of each action)."""
+    lines = ["| method | robot | profile | setting | forward | backward | left | right | turn (rad/s) | transitions "
+             "dropped for falls |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for result in results:
+        if not result.ok or result.job.labels.get("method") not in ("lat", "ik"):
+            continue
+        robot = result.rows[0]["robot"] if result.rows else "?"
+        for path in sorted(Path(result.job.run_dir).glob("dynamics_data_*.npz")):
+            data = TransitionData.load(path)
+            _, delta = local_transition(data.com_state, data.next_com_state)
+            duration = 1.0
+            dx, dy, dyaw = (delta[:, i].numpy() / duration for i in range(3))
+            p = lambda v: float(np.percentile(v, 95))  # noqa: E731
+            lines.append(f"| {result.job.labels['method']} | {robot} | {result.job.labels['profile']} | "
+                         f"{path.stem.removeprefix('dynamics_data_')} | {p(dx):.2f} | {p(-dx):.2f} | {p(dy):.2f} | "
+                         f"{p(-dy):.2f} | {p(np.abs(dyaw)):.2f} | {data.metadata.get('dropped_failures', 0)} |")
+    return "\n".join(lines) + "\n"
+
+
+@recipe_main(__file__)
+def main(cfg) -> None:
+    robots = check(cfg)
+    faults, samples = fault_jobs(cfg, robots), sample_jobs(cfg, robots)
+    out = Path(cfg.out_dir)
+    results = studies.run_jobs(faults, address=cfg.ray.address, cores_per_job=cfg.ray.cores_per_job,
+                               fetch_run_dirs=cfg.ray.fetch_run_dirs)
+    rows = [{**row, "setting": f"{row['setting']}" + ("" if row["profile"] == "own" else f"_{row['profile']}")}
+            for row in studies.rows_of(results)]
+    failed = studies.report_failures(results)
+    if rows:
+        table = markdown_table(rows)
+        write_text(out / "adverse.csv", csv_text(rows, EPISODE_COLUMNS + ["profile"]))
+        write_text(out / "adverse.md", f"# Damage: LAT against IK under fault models ({cfg.preset_name} preset, "
+                                       f"{len(cfg.seeds)} seed(s))\n\nNormalised cost, mean +- std over targets and "
+                                       "seeds; `_stiff`: under the stiff actuator profile.\n\n" + table
+                                       + "\n## Speeds each fault leaves (random-action dynamics data)\n\n"
+                                       + achievable_speeds(results))
+        for result in results:  # LAT under every fault
+            if result.ok and result.job.labels["method"] == "lat":
+                for video in Path(result.job.run_dir).glob("videos/*_goal_reaching.mp4"):
+                    name = f"{Path(result.job.run_dir).name}_{video.name}"
+                    (out / "videos").mkdir(parents=True, exist_ok=True)
+                    shutil.copyfile(video, out / "videos" / name)
+        print("\n" + table)
+    if samples:
+        sample_results = studies.run_jobs(samples, address=cfg.ray.address, cores_per_job=cfg.ray.cores_per_job,
+                                          fetch_run_dirs=cfg.ray.fetch_run_dirs)
+        failed += studies.report_failures(sample_results)
+        sample_rows = studies.rows_of(sample_results)
+        if sample_rows:
+            write_text(out / "samples.csv", csv_text(sample_rows, EPISODE_COLUMNS + ["samples"]))
+            plot_samples(sample_rows, out / "samples.png",
+                         title=f"Cost after damage (rear legs locked) against re-learning samples ({cfg.preset_name})")
+    print(f"adverse tables and figures in {out}/")
+    if failed:
+        sys.exit(1)
+
+
+if __name__ == "__main__":
+    main()
