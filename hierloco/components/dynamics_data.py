@@ -33,6 +33,14 @@ from hierloco.envs.latent_env import LatentActionEnv
 from hierloco.io import ArtifactError, load_arrays, save_arrays
 
 
+MIN_ACTIONS_JUDGED = 200  # random actions executed before a setting where (nearly) every one falls is given up
+FALL_LIMIT = 0.95
+
+
+class DynamicsDataError(RuntimeError):
+    """Nearly every random action ends in a fall: the setting leaves the low level nothing to learn from."""
+
+
 class UniformActionPolicy(TensorDictModuleBase):
     """Writes ``action`` drawn uniformly from ``action_spec`` (box or finite set), from its own seeded generator."""
 
@@ -102,22 +110,27 @@ def collect_transitions(env: LatentActionEnv, num_transitions: int, *, episode_l
             valid = ~batch["next", "terminated"].reshape(-1)
             dropped += int((~valid).sum())
             take = min(int(valid.sum()), int(num_transitions) - kept)
-            index = torch.nonzero(valid).reshape(-1)[:take]
-            states.append(batch["com_state"][index])
-            actions.append(batch["action"][index].reshape(take, -1).to(torch.float32))
-            next_states.append(batch["next", "com_state"][index])
+            if take:
+                index = torch.nonzero(valid).reshape(-1)[:take]
+                states.append(batch["com_state"][index])
+                actions.append(batch["action"][index].reshape(take, -1).to(torch.float32))
+                next_states.append(batch["next", "com_state"][index])
             kept += take
             bar.update(take)
             if kept >= num_transitions:
                 break
-            if dropped > 10 * int(num_transitions) + 10 * num_robots:
-                raise RuntimeError(f"{env.robot.name}: {dropped} of {kept + dropped} random actions ended in a fall "
-                                   f"or a blow-up; the low level cannot produce usable dynamics data")
+            executed = kept + dropped
+            if (dropped > 10 * int(num_transitions) + 10 * num_robots
+                    or (executed >= max(MIN_ACTIONS_JUDGED, 5 * num_robots) and dropped > FALL_LIMIT * executed)):
+                raise DynamicsDataError(f"{env.robot.name}: {dropped} of {executed} random actions ended in a fall or "
+                                        f"a blow-up (disabled legs {list(env.sim.disabled_legs)}, limp legs "
+                                        f"{list(env.sim.limp_legs)}): the low level cannot produce usable dynamics "
+                                        "data in this setting")
     finally:
         collector.shutdown()
         bar.close()
     metadata = {"low_level": env.low_level.describe(), "seed": int(seed), "episode_length": int(episode_length),
                 "num_robots": int(num_robots), "dropped_failures": dropped, "actions_executed": kept + dropped,
-                "disabled_legs": list(env.sim.disabled_legs)}
+                "disabled_legs": list(env.sim.disabled_legs), "limp_legs": list(env.sim.limp_legs)}
     return TransitionData(torch.cat(states).double().numpy(), torch.cat(actions).double().numpy(),
                           torch.cat(next_states).double().numpy(), metadata)

@@ -33,7 +33,7 @@ def check(cfg) -> list:
     from hierloco.envs.robots import get_robot
     from hierloco.envs.robots.profiles import PROFILES
 
-    as_lists(cfg, ("robots", "seeds", "methods", "samples", "sample_methods", "overrides"))
+    as_lists(cfg, ("robots", "seeds", "methods", "samples", "sample_methods", "overrides", "profiles"))
     problems, robots = [], []
     for robot in cfg.robots:
         try:
@@ -45,6 +45,9 @@ def check(cfg) -> list:
             studies.resolve_method(method, cfg.variants)
         except ValueError as error:
             problems.append(str(error))
+    for profile in cfg.profiles:
+        if profile not in cfg.faults:
+            problems.append(f"profile {profile!r} has no settings in faults")
     for profile, settings in cfg.faults.items():
         if profile not in PROFILES:
             problems.append(f"unknown robot profile {profile!r} in faults (profiles: {', '.join(PROFILES)})")
@@ -62,19 +65,29 @@ def run_dir(method: str, preset: str, robot, profile: str, seed: int) -> Path:
     return Path("outputs") / method / preset / f"{name}_seed{seed}"
 
 
-def fault_jobs(cfg, robots) -> list:
-    jobs = []
+PAPER_SETTINGS = ("normal", "legs_disabled")  # run together, in the run directory the comparison study shares
+
+
+def fault_jobs(cfg, robots) -> tuple[list, list]:
+    """The runs of the paper's settings (one run directory per method, robot, profile and seed), and one job per
+    other fault, starting from the first's trained low level (so a fault nothing can be learned in fails alone)."""
+    main, extra = [], []
     for robot, spec in zip(cfg.robots, robots):
         for method in cfg.methods:
             recipe, variant = studies.resolve_method(method, cfg.variants)
-            for profile, settings in cfg.faults.items():
+            for profile in cfg.profiles:
+                settings = list(cfg.faults[profile])
                 for seed in cfg.seeds:
-                    overrides = [f"preset={cfg.preset_name}", f"robot={spec.reference}", f"seed={seed}",
-                                 f"robot_profile={profile}", f"settings=[{','.join(settings)}]", "progress=false",
-                                 *variant, *cfg.overrides]
-                    jobs.append(studies.Job(recipe, str(run_dir(method, cfg.preset_name, spec, profile, seed)),
-                                            overrides, labels={"method": method, "profile": profile}))
-    return jobs
+                    common = [f"preset={cfg.preset_name}", f"robot={spec.reference}", f"seed={seed}",
+                              f"robot_profile={profile}", "progress=false", *variant, *cfg.overrides]
+                    home = run_dir(method, cfg.preset_name, spec, profile, seed)
+                    labels = {"method": method, "profile": profile}
+                    paper = [s for s in settings if s in PAPER_SETTINGS] or ["normal"]
+                    main.append(studies.Job(recipe, str(home), [*common, f"settings=[{','.join(paper)}]"], labels=labels))
+                    for fault in (s for s in settings if s not in paper):
+                        extra.append(studies.Job(recipe, f"{home}_{fault}", [*common, f"settings=[{fault}]"],
+                                                 labels=labels, reuse_from=str(home), reuse_stages=TRAINING))
+    return main, extra
 
 
 def sample_jobs(cfg, robots) -> list:
@@ -116,40 +129,49 @@ def achievable_speeds(results) -> str:
     return "\n".join(lines) + "\n"
 
 
+def run(cfg, jobs) -> list:
+    return studies.run_jobs(jobs, address=cfg.ray.address, cores_per_job=cfg.ray.cores_per_job,
+                            fetch_run_dirs=cfg.ray.fetch_run_dirs)
+
+
 @recipe_main(__file__)
 def main(cfg) -> None:
     robots = check(cfg)
-    faults, samples = fault_jobs(cfg, robots), sample_jobs(cfg, robots)
+    main_jobs, extra_jobs = fault_jobs(cfg, robots)
+    samples = sample_jobs(cfg, robots)
     out = Path(cfg.out_dir)
-    results = studies.run_jobs(faults, address=cfg.ray.address, cores_per_job=cfg.ray.cores_per_job,
-                               fetch_run_dirs=cfg.ray.fetch_run_dirs)
-    rows = [{**row, "setting": f"{row['setting']}" + ("" if row["profile"] == "own" else f"_{row['profile']}")}
-            for row in studies.rows_of(results)]
-    failed = studies.report_failures(results)
+    results = run(cfg, main_jobs)
+    later = run(cfg, extra_jobs + samples) if extra_jobs or samples else []  # from the trained low levels
+    fault_results, sample_results = results + later[: len(extra_jobs)], later[len(extra_jobs):]
+    failed = studies.report_failures(fault_results + sample_results)
+    rows = [{**row, "setting": row["setting"] + ("" if row["profile"] == "own" else f"_{row['profile']}")}
+            for row in studies.rows_of(fault_results)]
+    unusable = [r for r in fault_results if not r.ok]
     if rows:
         table = markdown_table(rows)
         write_text(out / "adverse.csv", csv_text(rows, EPISODE_COLUMNS + ["profile"]))
+        notes = "".join(f"- {r.job.labels['method']} in {r.job.run_dir}: {r.error}\n" for r in unusable)
         write_text(out / "adverse.md", f"# Damage: LAT against IK under fault models ({cfg.preset_name} preset, "
                                        f"{len(cfg.seeds)} seed(s))\n\nNormalised cost, mean +- std over targets and "
                                        "seeds; `_stiff`: under the stiff actuator profile.\n\n" + table
                                        + "\n## Speeds each fault leaves (random-action dynamics data)\n\n"
-                                       + achievable_speeds(results))
-        for result in results:  # LAT under every fault
+                                       + achievable_speeds(fault_results)
+                                       + ("\n## Runs that could not be evaluated\n\n" + notes if notes else ""))
+        for result in fault_results:  # LAT under every fault
             if result.ok and result.job.labels["method"] == "lat":
                 for video in Path(result.job.run_dir).glob("videos/*_goal_reaching.mp4"):
-                    name = f"{Path(result.job.run_dir).name}_{video.name}"
+                    home = Path(result.job.run_dir).name
+                    for fault in SETTINGS:  # the extra faults' run directories are <home>_<fault>
+                        home = home.removesuffix(f"_{fault}")
+                    name = f"{home}_{video.name}"
                     (out / "videos").mkdir(parents=True, exist_ok=True)
                     shutil.copyfile(video, out / "videos" / name)
         print("\n" + table)
-    if samples:
-        sample_results = studies.run_jobs(samples, address=cfg.ray.address, cores_per_job=cfg.ray.cores_per_job,
-                                          fetch_run_dirs=cfg.ray.fetch_run_dirs)
-        failed += studies.report_failures(sample_results)
-        sample_rows = studies.rows_of(sample_results)
-        if sample_rows:
-            write_text(out / "samples.csv", csv_text(sample_rows, EPISODE_COLUMNS + ["samples"]))
-            plot_samples(sample_rows, out / "samples.png",
-                         title=f"Cost after damage (rear legs locked) against re-learning samples ({cfg.preset_name})")
+    sample_rows = studies.rows_of(sample_results)
+    if sample_rows:
+        write_text(out / "samples.csv", csv_text(sample_rows, EPISODE_COLUMNS + ["samples"]))
+        plot_samples(sample_rows, out / "samples.png",
+                     title=f"Cost after damage (rear legs locked) against re-learning samples ({cfg.preset_name})")
     print(f"adverse tables and figures in {out}/")
     if failed:
         sys.exit(1)

@@ -29,10 +29,11 @@ def user_errors() -> tuple[type[BaseException], ...]:
     from recipes.common.config import ConfigError
 
     errors = [ConfigError, ArtifactError, RunLockedError, ReadOnlyRunError, OmegaConfBaseException]
+    from hierloco.components.dynamics_data import DynamicsDataError
     from hierloco.components.expert_library import ExpertQualityError
     from recipes.common.stages import GaitPolicyQualityError
 
-    return (*errors, ExpertQualityError, GaitPolicyQualityError)
+    return (*errors, ExpertQualityError, GaitPolicyQualityError, DynamicsDataError)
 
 
 def one_line(error: BaseException) -> str:

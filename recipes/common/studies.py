@@ -165,7 +165,8 @@ def run_jobs(jobs: Sequence[Job], *, address: str | None = None, cores_per_job: 
             if address:
                 ray.init(address=address, log_to_driver=False,
                          runtime_env={"working_dir": str(RECIPES.parent), "excludes": ["outputs", ".venv", ".git"]})
-            else:
+            else:  # a local instance; its workers run at normal priority (Ray lowers it by default)
+                os.environ.setdefault("RAY_worker_niceness", "0")
                 ray.init(num_cpus=_available_cores(), include_dashboard=False, log_to_driver=False,
                          configure_logging=False)
         remote = ray.remote(execute)

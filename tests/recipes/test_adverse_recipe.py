@@ -1,5 +1,7 @@
 """The damage study on tiny settings: fault models through the study engine, their table with achievable speeds,
-LAT's videos under each fault, and few-sample re-learning that reuses the trained low level."""
+LAT's videos under each fault, few-sample re-learning that reuses the trained low level, and a fault nothing can be
+learned in (A1 sits down on unpowered rear legs: every random action ends in a fall) reported without stopping the
+others."""
 
 import os
 import subprocess
@@ -14,17 +16,19 @@ ROOT = Path(__file__).resolve().parents[2]
 def test_adverse_tiny(tmp_path):
     out = tmp_path / "adverse"
     command = [sys.executable, str(ROOT / "recipes" / "adverse" / "run.py"), "preset=tiny", "robots=[a1]", "seeds=[0]",
-               "methods=[lat]", "faults={own: [normal, rear_limp, one_leg_locked]}", "samples=[50]",
-               "sample_methods=[lat]", f"out_dir={out}", "overrides=[eval.generalization=null,eval.figures=false]"]
+               "methods=[lat]", "profiles=[own]", "faults.own=[normal,rear_limp,one_leg_locked]", "samples=[50]",
+               "sample_methods=[lat]", f"out_dir={out}", 'overrides=["eval.generalization=null","eval.figures=false"]']
     result = subprocess.run(command, cwd=tmp_path, env={**os.environ, "WANDB_MODE": "offline"}, capture_output=True,
                             text=True, timeout=1200)
-    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    assert result.returncode == 1, result.stdout[-3000:] + result.stderr[-3000:]
+    assert "a1_seed0_rear_limp" in result.stderr and "ended in a fall" in result.stderr
     rows = read_csv(out / "adverse.csv")
-    assert {r["setting"] for r in rows} == {"normal", "rear_limp", "one_leg_locked"}
+    assert {r["setting"] for r in rows} == {"normal", "one_leg_locked"}
     table = (out / "adverse.md").read_text()
-    assert "| lat | a1 | own | rear_limp |" in table  # the speeds the fault leaves
+    assert "| lat | a1 | own | one_leg_locked |" in table  # the speeds the fault leaves
+    assert "## Runs that could not be evaluated" in table and "limp legs ['RR', 'RL']" in table
     assert {p.name for p in (out / "videos").iterdir()} == {f"a1_seed0_{s}_goal_reaching.mp4" for s in
-                                                            ("normal", "rear_limp", "one_leg_locked")}
+                                                            ("normal", "one_leg_locked")}
     samples = read_csv(out / "samples.csv")
     assert {r["setting"] for r in samples} == {"legs_disabled"} and {int(r["samples"]) for r in samples} == {50}
     trained = tmp_path / "outputs" / "lat" / "tiny" / "a1_seed0"
