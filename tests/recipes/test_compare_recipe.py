@@ -54,7 +54,7 @@ def test_compare_through_ray_equals_the_jobs_one_by_one(tmp_path):
 
 def test_a_failed_job_is_reported_and_the_others_go_on(tmp_path):
     result = compare(tmp_path, f"out_dir={tmp_path / 'out'}", "methods=[lib,ik]", "seeds=[0]",
-                     "method_overrides={ik: [dynamics.num_transitions=5]}")
+                     '+method_overrides.ik=["dynamics.num_transitions=5"]')
     assert result.returncode == 1
     assert "failed: ik in" in result.stderr and "num_transitions" in result.stderr, result.stderr[-2000:]
     assert {r["method"] for r in read_csv(tmp_path / "out" / "comparison.csv")} == {"lib"}
