@@ -140,7 +140,7 @@ def train_gait_policy(
     """Fits ``pi`` and one latent per expert to ``G x N x J`` expert joint targets (rad).
 
     Returns the trained policy, the ``G x Z`` latents, the latent box they span, and a report in ``metadata``:
-    ``rmse_per_joint`` (rad), ``rmse`` and the training time.
+    ``rmse_per_joint`` (rad), ``rmse``, the training time and ``loss_history`` (the mean standardised MSE per epoch).
     """
     targets = torch.as_tensor(np.asarray(joint_targets), dtype=torch.float32)
     if targets.ndim != 3:
@@ -162,8 +162,10 @@ def train_gait_policy(
     total = normalized.shape[0]
     start = time.perf_counter()
     schedule = torch.optim.lr_scheduler.CosineAnnealingLR(policy_optim, T_max=epochs)
+    loss_history = []  # per epoch, the mean standardised MSE over its minibatches
     for _ in tqdm(range(epochs), desc="gait policy", disable=not progress):
         order = torch.randperm(total, generator=generator).to(device)
+        epoch_loss = torch.zeros((), device=device)
         for begin in range(0, total, batch_size):
             idx = order[begin:begin + batch_size]
             prediction = policy.normalized(phase[idx], latents[expert_index[idx]])
@@ -173,6 +175,8 @@ def train_gait_policy(
             loss.backward()
             policy_optim.step()
             latent_optim.step()
+            epoch_loss += loss.detach() * len(idx)
+        loss_history.append(float(epoch_loss) / total)
         schedule.step()
     policy.eval()
     with torch.no_grad():
@@ -181,5 +185,5 @@ def train_gait_policy(
     z = latents.detach().cpu()
     metadata = {"rmse_per_joint": rmse_per_joint.tolist(), "rmse": float(((reconstruction - targets) ** 2).mean().sqrt()),
                 "train_seconds": time.perf_counter() - start, "num_experts": num_experts, "epochs": epochs,
-                "seed": seed}
+                "seed": seed, "loss_history": loss_history}
     return TrainedGaitPolicy(policy.cpu(), z, z.min(0).values, z.max(0).values, metadata)

@@ -120,6 +120,7 @@ def build_gait_policy(run, params, library: ExpertLibrary) -> TrainedGaitPolicy:
     """``pi(t, z)`` and one latent per expert, fitted jointly to the experts (Li et al., Sec. III-B)."""
     periods = periods_per_action(run.robot, library.steps_per_action)
     trained = train_gait_policy(library.joint_targets, periods_per_action=periods, progress=run.progress, **params)
+    run.logger.log_curve("train/gait_policy", {"loss": trained.metadata["loss_history"]}, step_name="epoch")
     run.logger.log_scalar("train/gait_policy/rmse", trained.metadata["rmse"], step=params["epochs"])
     return trained
 
