@@ -1,4 +1,5 @@
-"""The expert library: G expert gaits, each one latent action (N control steps) of joint targets (SPEC 5.1).
+"""The expert library: G expert gaits, each one latent action (N control steps) of joint targets (Li et al.,
+Sec. III-B).
 
 :func:`build_expert_library` samples G commands ``(vx, vy, yaw_rate)`` in the robot's command box, runs the
 :class:`RaibertController` on each (all G in one batched simulation) until it is at steady state, then records one

@@ -83,7 +83,8 @@ def fault_jobs(cfg, robots) -> tuple[list, list]:
                     home = run_dir(method, cfg.preset_name, spec, profile, seed)
                     labels = {"method": method, "profile": profile}
                     paper = [s for s in settings if s in PAPER_SETTINGS] or ["normal"]
-                    main.append(studies.Job(recipe, str(home), [*common, f"settings=[{','.join(paper)}]"], labels=labels))
+                    main.append(studies.Job(recipe, str(home), [*common, f"settings=[{','.join(paper)}]"],
+                                            labels=labels))
                     for fault in (s for s in settings if s not in paper):
                         extra.append(studies.Job(recipe, f"{home}_{fault}", [*common, f"settings=[{fault}]"],
                                                  labels=labels, reuse_from=str(home), reuse_stages=TRAINING))

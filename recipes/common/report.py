@@ -122,8 +122,8 @@ def write_study_tables(rows: list[dict], results, out: Path, *, name: str, setti
     lines = ["| method | run directory | wall-clock (min) | reused |", "|---|---|---|---|"]
     for result in results:
         seconds = result.seconds if not result.reused else _recorded_seconds(result.job.run_dir)
-        lines.append(f"| {result.job.labels.get('method', result.job.method)} | {result.job.run_dir} | {seconds / 60:.1f} | "
-                     f"{'yes' if result.reused else 'no'} |")
+        method = result.job.labels.get("method", result.job.method)
+        lines.append(f"| {method} | {result.job.run_dir} | {seconds / 60:.1f} | {'yes' if result.reused else 'no'} |")
     write_text(out / "wallclock.md", "# Wall-clock per job\n\n" + "\n".join(lines) + "\n")
     for setting in settings:
         if any(r["setting"] == setting and r["task"] in tasks for r in rows):

@@ -96,3 +96,18 @@ def test_a_gait_policy_that_reproduces_too_few_experts_stops_the_run(tmp_path):
     result = lat(f"run_dir={tmp_path / 'run'}", "checks.min_reproduced_fraction=0.9")
     assert result.returncode == 2 and "the gait policy reproduces" in result.stderr, result.stderr
     assert not (tmp_path / "run" / "dynamics_data_normal.npz").exists()
+
+
+def test_a_yaml_robot_runs_through_the_comparison_study(robot_yaml, tmp_path):
+    """The robot reaches the study's Ray workers as a path (no Python of the user's anywhere)."""
+    from hierloco.results import read_csv
+
+    command = [sys.executable, str(ROOT / "recipes" / "compare" / "run.py"), "preset=tiny", f"robots=[{robot_yaml}]",
+               "methods=[lib]", "seeds=[0]", "settings=[normal]", f"out_dir={tmp_path / 'out'}",
+               'overrides=["eval.generalization=null","eval.videos=[]","eval.figures=false"]']
+    result = subprocess.run(command, cwd=tmp_path, capture_output=True, text=True, timeout=900,
+                            env={**os.environ, "WANDB_MODE": "offline"})
+    assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-2000:]
+    rows = read_csv(tmp_path / "out" / "comparison.csv")
+    assert {(r["method"], r["robot"]) for r in rows} == {("lib", "quadruped20")}
+    assert (tmp_path / "outputs" / "lib" / "tiny" / "quadruped20_seed0" / "results.csv").exists()
