@@ -228,6 +228,17 @@ def build_evaluation(run, params, make_low_level, model: TrainedCoMModel) -> Tas
 
 
 # ---------------------------------------------------------------------------------------------------- helpers
+def per_setting_stages(cfg, low_level: dict, robot) -> list[Stage]:
+    """The model-based part of a plan, for every setting: dynamics data on the low level, the CoM model, one
+    evaluation per task (LAT, LIB and IK share it; only their low level differs)."""
+    planned = []
+    for setting in cfg.settings:
+        data = dynamics_data_stage(cfg, low_level, setting, robot)
+        model = dynamics_model_stage(cfg, data, setting)
+        planned += [data, model, *evaluation_stages(cfg, setting, model, low_level)]
+    return planned
+
+
 def evaluation_stages(cfg, setting: str, model: Stage, low_level: dict) -> list[Stage]:
     return [evaluation_stage(cfg, name, spec, setting, model, low_level) for name, spec in task_specs(cfg).items()]
 

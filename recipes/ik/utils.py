@@ -41,13 +41,7 @@ def low_level_key(cfg, robot) -> dict:
 
 def plan(cfg, robot) -> list[stages.Stage]:
     """Per setting: dynamics data over velocity commands, model, one evaluation per task."""
-    low_level = low_level_key(cfg, robot)
-    planned = []
-    for setting in cfg.settings:
-        data = stages.dynamics_data_stage(cfg, low_level, setting, robot)
-        model = stages.dynamics_model_stage(cfg, data, setting)
-        planned += [data, model, *stages.evaluation_stages(cfg, setting, model, low_level)]
-    return planned
+    return stages.per_setting_stages(cfg, low_level_key(cfg, robot), robot)
 
 
 def manifest(cfg, robot) -> dict:

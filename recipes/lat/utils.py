@@ -28,12 +28,8 @@ def plan(cfg, robot) -> list[stages.Stage]:
     experts = stages.experts_stage(cfg, robot_fingerprint(robot))
     policy = stages.gait_policy_stage(cfg, experts)
     low_level = stages.latent_low_level(policy)
-    planned = [experts, policy, stages.gait_policy_check_stage(cfg, policy)]
-    for setting in cfg.settings:
-        data = stages.dynamics_data_stage(cfg, low_level, setting, robot)
-        model = stages.dynamics_model_stage(cfg, data, setting)
-        planned += [data, model, *stages.evaluation_stages(cfg, setting, model, low_level)]
-    return planned
+    return [experts, policy, stages.gait_policy_check_stage(cfg, policy),
+            *stages.per_setting_stages(cfg, low_level, robot)]
 
 
 def manifest(cfg, robot) -> dict:

@@ -22,12 +22,7 @@ def plan(cfg, robot) -> list[stages.Stage]:
 
     experts = stages.experts_stage(cfg, robot_fingerprint(robot))
     low_level = {"kind": "expert_replay", "experts": experts.digest}
-    planned = [experts]
-    for setting in cfg.settings:
-        data = stages.dynamics_data_stage(cfg, low_level, setting, robot)
-        model = stages.dynamics_model_stage(cfg, data, setting)
-        planned += [data, model, *stages.evaluation_stages(cfg, setting, model, low_level)]
-    return planned
+    return [experts, *stages.per_setting_stages(cfg, low_level, robot)]
 
 
 def manifest(cfg, robot) -> dict:
