@@ -15,7 +15,7 @@ SMALL = ["eval.generalization=null", "eval.videos=[]", "eval.figures=false"]
 def compare(cwd, *overrides):
     env = {**os.environ, "WANDB_MODE": "offline"}
     command = [sys.executable, str(ROOT / "recipes" / "compare" / "run.py"), "preset=tiny", "robots=[a1]",
-               "methods=[lat,lib]", "seeds=[0,1]", "settings=[normal]", f"overrides={SMALL}".replace("'", '"'),
+               "methods=[lib,ik]", "seeds=[0,1]", "settings=[normal]", f"overrides={SMALL}".replace("'", '"'),
                *overrides]
     return subprocess.run(command, cwd=cwd, env=env, capture_output=True, text=True, timeout=1200)
 
@@ -28,7 +28,7 @@ def test_compare_through_ray_equals_the_jobs_one_by_one(tmp_path):
     assert "study: 4 jobs, 0 reused" in result.stdout and "study: 4 done, 0 running, 0 failed" in result.stdout
 
     one_by_one = []
-    for method in ("lat", "lib"):
+    for method in ("lib", "ik"):
         for seed in (0, 1):
             run_dir = tmp_path / "single" / f"{method}_{seed}"
             done = subprocess.run([sys.executable, str(ROOT / "recipes" / method / "train.py"), "preset=tiny",
@@ -42,7 +42,7 @@ def test_compare_through_ray_equals_the_jobs_one_by_one(tmp_path):
     comparable = lambda rows: [repr(sorted(r.items())) for r in sorted(rows, key=key)]  # noqa: E731  (NaN as text)
     assert comparable(through_ray) == comparable(one_by_one)
     table = (by_ray / "out" / "comparison.md").read_text()
-    assert "| lat | a1 | normal | goal_reaching |" in table and "| lib | a1 | normal | goal_reaching |" in table
+    assert "| ik | a1 | normal | goal_reaching |" in table and "| lib | a1 | normal | goal_reaching |" in table
     assert (by_ray / "out" / "comparison_normal.png").read_bytes()[:4] == b"\x89PNG"
     assert (by_ray / "outputs" / "lib" / "tiny" / "a1_seed1" / "job.json").exists()
 
