@@ -18,7 +18,7 @@ Example:
     >>> low = SACLowLevel(trained, steps_per_action=10)
     >>> report = evaluate_velocity_tracking(low, command_grid("a1", 2), num_actions=2, settle_actions=1)
     >>> len(report["rows"]), sorted(report["summary"])[:2]
-    (8, ['fall_rate', 'linear_error_mean'])
+    (8, ['fall_rate', 'linear_error_max'])
 """
 
 from __future__ import annotations
