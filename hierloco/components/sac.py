@@ -11,7 +11,8 @@ The paper's networks and optimiser are the defaults: 2 hidden layers of 512 ReLU
 ``PAPER_BATCH_SIZE``). One update is one ``SACLoss`` forward and backward, one fused Adam step and one soft target
 update; with ``compile_update=True`` the loss forward and backward are compiled with :func:`torch.compile`
 (it removes most of the Python overhead of small networks, at a one-off compile cost of about a minute on two
-cores; ``benchmarks/bench_sac.py`` measures both).
+cores; ``benchmarks/bench_sac.py`` measures both). Train with one torch thread (:func:`torch_threads`, the default
+of :func:`train_sac`) when cores are shared: small updates run many times faster than with two.
 
 Example:
     >>> import torch
@@ -100,7 +101,8 @@ class SACAgent:
             lr: Adam learning rate of the actor, the Q networks and the temperature.
             gamma: discount per step; tau: soft target-update rate.
             alpha_init: initial entropy temperature (then learned).
-            compile_update: compile the loss forward and backward with :func:`torch.compile`.
+            compile_update: compile the loss forward and backward with :func:`torch.compile` (at the first update;
+                dynamo recompiles for each compiled agent of a process and falls back to eager after 8).
             seed: seeds the network initialisation (the global RNG is left as it was).
         """
         config = {"observation_dim": int(observation_dim), "action_low": [float(v) for v in action_low],
@@ -129,24 +131,21 @@ class SACAgent:
                 distribution_kwargs={"low": low, "high": high}, return_log_prob=False)
             qvalue = ValueOperator(MLP(in_features=observation_dim + dim, out_features=1, num_cells=cells,
                                        activation_class=nn.ReLU), in_keys=[observation_key, "action"])
-            # SACLoss initialises the second Q network (and the target copies) from the global RNG: seed it too
-            loss = SACLoss(actor, qvalue, num_qvalue_nets=2, loss_function="l2", alpha_init=config["alpha_init"])
+            # SACLoss initialises the second Q network (and the target copies) from the global RNG: seed it too.
+            # Eagerly, a loop over the two Q nets is faster on CPU than vmap; compiled, vmap is (and the loop
+            # recompiles at every call): benchmarks/bench_sac.py
+            loss = SACLoss(actor, qvalue, num_qvalue_nets=2, loss_function="l2", alpha_init=config["alpha_init"],
+                           deactivate_vmap=not compile_update)
         loss.make_value_estimator(gamma=config["gamma"])
         # fused: one kernel for every parameter instead of a Python loop over them
         optimizer = torch.optim.Adam(loss.parameters(), lr=config["lr"], fused=True)
-        agent = cls(actor, qvalue, loss, optimizer, SoftUpdate(loss, tau=config["tau"]), config)
-        agent.set_compile(compile_update)
-        return agent
+        terms = _loss_terms(loss)
+        return cls(actor, qvalue, loss, optimizer, SoftUpdate(loss, tau=config["tau"]), config,
+                   compile_update=bool(compile_update), _terms=torch.compile(terms) if compile_update else terms)
 
     @property
     def observation_key(self) -> str:
         return self.config["observation_key"]
-
-    def set_compile(self, compile_update: bool) -> None:
-        """Runs the loss eagerly or compiled with :func:`torch.compile` (compiled at the next update)."""
-        self.compile_update = bool(compile_update)
-        terms = _loss_terms(self.loss)
-        self._terms = torch.compile(terms) if self.compile_update else terms
 
     def update(self, batch: TensorDictBase) -> dict:
         """One gradient step on a replay batch (``M`` transitions with the observation, ``action`` and the

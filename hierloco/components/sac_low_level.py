@@ -121,7 +121,7 @@ def train_sac_low_level(
         log_every: frames between learning-curve points (and logger calls).
         checkpoint_path: where the training state goes every ``checkpoint_every`` frames and at the end; if it
             exists when training starts, training resumes from it (it must come from the same settings).
-        compile_update: compile the SAC update (:meth:`SACAgent.set_compile`).
+        compile_update: compile the SAC update (:meth:`SACAgent.build`).
         torch_threads_during: torch threads while training (:func:`torch_threads`).
         nthread: simulation threads. seed: networks, commands, reset noise and exploration.
         progress: show a progress bar. logger: anything with ``log_metrics(dict, step=)``
