@@ -6,7 +6,7 @@ commands against the IK expert controller (the same commands, the same measureme
 Training checkpoints to ``<out>/training.pt`` every ``--checkpoint-every`` frames: run the same command again after
 a kill and it resumes (with a smaller ``--total-frames`` than already done it just evaluates). Writes
 ``<out>/sac_low_level.pt`` (the artifact), ``<out>/report.json`` (settings, wall-clock, learning curve, tracking
-per command for SAC and IK) and ``<out>/report.md`` (the same as tables).
+per command for SAC and IK), ``<out>/report.md`` (the same as tables) and ``<out>/learning_curve.png``.
 """
 
 from __future__ import annotations
@@ -27,6 +27,7 @@ from hierloco.components.sac_low_level import (
     train_sac_low_level,
 )
 from hierloco.io import write_text
+from hierloco.plots import plt, save_figure
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -59,6 +60,19 @@ def _table(report: dict) -> str:
                  f"mean yaw-rate error {s['yaw_rate_error_mean']:.3f} rad/s (standing still: "
                  f"{s['yaw_rate_error_standing']:.3f}), fall rate {s['fall_rate']:.2f}")
     return "\n".join(lines)
+
+
+def plot_learning_curve(curve: list[dict], path: Path) -> None:
+    """Tracking error and reward per step against frames (exploring policy, as collected)."""
+    frames = [p["frames"] / 1e3 for p in curve]
+    fig, (left, right) = plt.subplots(1, 2, figsize=(9, 3.2))
+    left.plot(frames, [p["tracking_error"] for p in curve])
+    left.set(xlabel="frames (thousands)", ylabel="tracking error (m/s)", ylim=(0, None))
+    right.plot(frames, [p["reward"] for p in curve])
+    right.set(xlabel="frames (thousands)", ylabel="reward per step")
+    fig.suptitle("SAC-SAC low level: learning curve")
+    fig.tight_layout()
+    save_figure(fig, path)
 
 
 def main(argv=None) -> None:
@@ -95,6 +109,7 @@ def main(argv=None) -> None:
             f"\n\n## Tracking, SAC low level (deterministic actor)\n\n{_table(sac)}\n\n"
             f"## Tracking, IK expert controller (reference)\n\n{_table(ik)}\n")
     write_text(out / "report.md", text)
+    plot_learning_curve(meta["learning_curve"], out / "learning_curve.png")
     print(text)
     print(f"mean SAC tracking error {np.mean([r['linear_error'] for r in sac['rows']]):.3f} m/s")
 
