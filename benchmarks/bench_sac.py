@@ -12,7 +12,8 @@ target Q nets, temperature), its backward pass, the Adam step and the soft targe
 1.8x the reference's, so the ratio cannot fall much below that. Workloads are timed interleaved, fastest of
 ``--repeats``, with one torch thread (what the training loops use; timed in the thread's CPU time, which a busy
 shared machine does not inflate by preempting the call) and with the process's default threads (wall-clock);
-"before" is the update as it was (non-fused Adam) at the same threads. Observation 48, action 12 (the SAC-SAC low
+"before" is the update as it was built before (the two Q nets vmapped, Adam's per-parameter loop) at the same
+threads. Observation 48, action 12 (the SAC-SAC low
 level on A1).
 """
 
@@ -25,6 +26,8 @@ from dataclasses import dataclass
 import torch
 from tensordict import TensorDict
 from torch import nn
+
+from torchrl.objectives import SACLoss, SoftUpdate
 
 from hierloco.components.sac import SACAgent, torch_threads
 
@@ -64,11 +67,21 @@ def reference_update(hidden: int, batch: TensorDict):
     return update
 
 
-def sac_agent(hidden: int, *, compile_update: bool = False, fused: bool = True) -> SACAgent:
-    agent = SACAgent.build(OBSERVATION_DIM, [-1.0] * ACTION_DIM, [1.0] * ACTION_DIM, hidden=hidden,
-                           observation_key="observation", compile_update=compile_update)
-    if not fused:  # the update before this benchmark: Adam's per-parameter loop
-        agent.optimizer = torch.optim.Adam(agent.loss.parameters(), lr=agent.config["lr"])
+def sac_agent(hidden: int, *, compile_update: bool = False, before: bool = False,
+              observation_dim: int = OBSERVATION_DIM, action_low=None, action_high=None,
+              observation_key: str = "observation", seed: int = 0) -> SACAgent:
+    """The agent as built now, or (``before``) as it was built before this benchmark: the two Q nets vmapped and
+    Adam's per-parameter loop."""
+    low = [-1.0] * ACTION_DIM if action_low is None else action_low
+    high = [1.0] * ACTION_DIM if action_high is None else action_high
+    agent = SACAgent.build(observation_dim, low, high, hidden=hidden, observation_key=observation_key,
+                           compile_update=compile_update, seed=seed)
+    if before:
+        loss = SACLoss(agent.actor, agent.qvalue, num_qvalue_nets=2, loss_function="l2",
+                       alpha_init=agent.config["alpha_init"])
+        loss.make_value_estimator(gamma=agent.config["gamma"])
+        agent = SACAgent(agent.actor, agent.qvalue, loss, torch.optim.Adam(loss.parameters(), lr=agent.config["lr"]),
+                         SoftUpdate(loss, tau=agent.config["tau"]), agent.config)
     return agent
 
 
@@ -108,7 +121,7 @@ def benchmark_update(hidden: int, batch_size: int, threads: int, *, repeats: int
         agent = sac_agent(hidden)
         workloads["sac"] = lambda: agent.update(batch)
         if before:
-            old = sac_agent(hidden, fused=False)
+            old = sac_agent(hidden, before=True)
             workloads["before"] = lambda: old.update(batch)
         if compile_update:
             compiled = sac_agent(hidden, compile_update=True)
@@ -167,7 +180,8 @@ def format_updates(rows: list[UpdateRow]) -> str:
         lines.append(f"{r.hidden:>7}{r.batch:>7}{r.threads:>8}{r.reference_ms:>10.1f}{r.sac_ms:>9.1f}"
                      f"{r.ratio:>7.2f}{before}{compiled}  {flag}")
     lines.append(f"target: one SAC update within {TARGET_RATIO:.0f}x a plain update of the same three networks "
-                 "(forward + MSE + backward + Adam, same batch); 'before': non-fused Adam, same threads;\n"
+                 "(forward + MSE + backward + Adam, same batch); 'before': vmapped Q nets, non-fused Adam, same "
+                 "threads;\n"
                  "one thread: CPU time of the thread; more threads: wall-clock")
     return "\n".join(lines)
 
@@ -176,8 +190,8 @@ def high_level_training(frames: int, *, num_robots: int = 16, hidden: int = 512,
                         updates_per_frame: float = 1.0, before: bool = False, seed: int = 0) -> dict:
     """Wall-clock of goal-conditioned SAC over z on A1 (the SAC baseline's high level): ``frames`` latent actions on
     ``num_robots`` robots per collector step, goal reaching on half the goals. The LAT low level is a quick one (10
-    experts, 100 epochs): its quality does not change the cost of a step. ``before``: default torch threads and
-    non-fused Adam, as the SAC recipe ran before."""
+    experts, 100 epochs): its quality does not change the cost of a step. ``before``: the agent as it was built
+    before (vmapped Q nets, non-fused Adam) on the default torch threads, as the SAC recipe ran."""
     from hierloco.components.expert_library import build_expert_library
     from hierloco.components.gait_policy import train_gait_policy
     from hierloco.components.low_level import LatentLowLevel
@@ -195,9 +209,8 @@ def high_level_training(frames: int, *, num_robots: int = 16, hidden: int = 512,
     env = TransformedEnv(LatentActionEnv(low, num_robots=num_robots, seed=seed),
                          Compose(TaskTransform(task, torch.arange(num_robots) % task.num_episodes),
                                  GoalObservation(task)))
-    agent = SACAgent.build(GoalObservation.SIZE, low.action_low, low.action_high, hidden=hidden, seed=seed)
-    if before:
-        agent.optimizer = torch.optim.Adam(agent.loss.parameters(), lr=agent.config["lr"])
+    agent = sac_agent(hidden, before=before, observation_dim=GoalObservation.SIZE, action_low=low.action_low,
+                      action_high=low.action_high, observation_key="goal_observation", seed=seed)
     report = train_sac(env, agent, total_frames=frames, init_random_frames=min(1000, frames // 2),
                        updates_per_frame=updates_per_frame, batch_size=batch_size, buffer_size=10_000,
                        log_every=max(1, frames // 4), torch_threads_during=None if before else 1, seed=seed,
@@ -205,7 +218,8 @@ def high_level_training(frames: int, *, num_robots: int = 16, hidden: int = 512,
     env.close()
     return {"frames": report["frames"], "updates": report["updates"], "seconds": report["train_seconds"],
             "collection_seconds": report["seconds"]["collection"], "update_seconds": report["seconds"]["update"],
-            "reward_first": report["learning_curve"][0]["reward"], "reward_last": report["learning_curve"][-1]["reward"]}
+            "reward_first": report["learning_curve"][0]["reward"],
+            "reward_last": report["learning_curve"][-1]["reward"]}
 
 
 def main(argv=None) -> int:
@@ -236,15 +250,23 @@ def main(argv=None) -> int:
         print(f"\ncompiled update: first call (compile) {check['compile_seconds']:.0f} s; max relative difference to "
               f"the eager update over 3 updates {check['max_relative_difference']:.1e}")
     if args.high_level_frames:
+        after = None
         for before in (False, True):
             frames = args.high_level_frames if not before or args.before_frames is None else args.before_frames
-            label = "before (default threads, non-fused Adam)" if before else "after (one thread, fused Adam)"
+            label = ("before (default threads, vmapped Q nets, non-fused Adam)" if before
+                     else "after (one thread, looped Q nets, fused Adam)")
             print(f"\nSAC high level on A1, {frames} frames, 2 x 512, batch 512, 16 robots per step: {label} ...",
                   flush=True)
             r = high_level_training(frames, before=before)
-            print(f"  {r['seconds']:.0f} s ({r['update_seconds']:.0f} s in {r['updates']} updates, "
-                  f"{r['collection_seconds']:.0f} s collecting); {r['seconds'] * 10_000 / r['frames']:.0f} s per "
-                  f"10,000 frames; reward {r['reward_first']:.3f} -> {r['reward_last']:.3f}")
+            print(f"  {r['seconds']:.0f} s: {r['update_seconds']:.0f} s in {r['updates']} updates "
+                  f"({1000 * r['update_seconds'] / max(1, r['updates']):.0f} ms each), {r['collection_seconds']:.0f} s "
+                  f"collecting; reward {r['reward_first']:.3f} -> {r['reward_last']:.3f}")
+            if after is None:
+                after = r
+            elif r["frames"] != after["frames"]:  # the same run's cost at the 'after' run's length
+                estimate = (r["collection_seconds"] / r["frames"] * after["frames"]
+                            + r["update_seconds"] / max(1, r["updates"]) * after["updates"])
+                print(f"  estimated for {after['frames']} frames ({after['updates']} updates): {estimate:.0f} s")
     if args.check and any(r.ratio > TARGET_RATIO for r in rows if r.threads == 1):
         return 1
     return 0

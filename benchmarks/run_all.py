@@ -5,7 +5,8 @@
     ./run.sh bench --check                          # exit 1 when a target ratio is missed
 
 Simulation: batched simulator vs native mujoco.rollout vs a naive TorchRL loop. Planning: one MPC call vs the bare
-model forward pass. LAT end to end at paper scale is timed by the recipe itself (report.json, stage_seconds).
+model forward pass. SAC: one SAC update vs a plain update of the same networks (bench_sac.py, more options there).
+LAT end to end at paper scale is timed by the recipe itself (report.json, stage_seconds).
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ import os
 import sys
 
 import bench_planner
+import bench_sac
 import bench_sim
 
 from hierloco.envs import get_robot
@@ -61,7 +63,12 @@ def main(argv=None) -> int:
     planner_rows = [bench_planner.benchmark_planner(robots=1), bench_planner.benchmark_planner(robots=8)]
     print()
     print(bench_planner.format_table(planner_rows))
-    if args.check and (not bench_sim.targets_met(rows) or any(r.ratio > 2.0 for r in planner_rows)):
+    print("\nbenchmarking one SAC update ...", flush=True)
+    sac_rows = [bench_sac.benchmark_update(size, size, 1, repeats=args.repeats, before=True) for size in (256, 512)]
+    print()
+    print(bench_sac.format_updates(sac_rows))
+    if args.check and (not bench_sim.targets_met(rows) or any(r.ratio > 2.0 for r in planner_rows)
+                       or any(r.ratio > bench_sac.TARGET_RATIO for r in sac_rows)):
         return 1
     return 0
 

@@ -50,13 +50,15 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 
 def _table(report: dict) -> str:
-    lines = ["| command (vx, vy, wz) | achieved | linear error m/s | yaw-rate error rad/s | fell |", "|---|---|---|---|---|"]
+    lines = ["| command (vx, vy, wz) | achieved | linear error m/s | yaw-rate error rad/s | fell |",
+             "|---|---|---|---|---|"]
     for row in report["rows"]:
         c, a = row["command"], row["achieved"]
         lines.append(f"| ({c[0]:+.2f}, {c[1]:+.2f}, {c[2]:+.2f}) | ({a[0]:+.3f}, {a[1]:+.3f}, {a[2]:+.3f}) | "
                      f"{row['linear_error']:.3f} | {row['yaw_rate_error']:.3f} | {'yes' if row['fell'] else ''} |")
     s = report["summary"]
-    lines.append(f"\nmean linear error {s['linear_error_mean']:.3f} m/s (standing still: {s['linear_error_standing']:.3f}), "
+    lines.append(f"\nmean linear error {s['linear_error_mean']:.3f} m/s "
+                 f"(standing still: {s['linear_error_standing']:.3f}), "
                  f"mean yaw-rate error {s['yaw_rate_error_mean']:.3f} rad/s (standing still: "
                  f"{s['yaw_rate_error_standing']:.3f}), fall rate {s['fall_rate']:.2f}")
     return "\n".join(lines)

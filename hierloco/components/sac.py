@@ -87,6 +87,10 @@ class SACAgent:
     compile_update: bool = False
     _terms: Callable | None = field(default=None, repr=False)
 
+    def __post_init__(self):
+        if self._terms is None:
+            self._terms = _loss_terms(self.loss)
+
     @classmethod
     def build(cls, observation_dim: int, action_low: Sequence[float], action_high: Sequence[float], *,
               hidden: int = PAPER_HIDDEN, num_layers: int = 2, lr: float = PAPER_LR, gamma: float = 0.95,

@@ -133,7 +133,8 @@ def train_sac_low_level(
         ``tracking_error`` (m/s), ``falls_per_1000_frames``, each ``reward/<term>`` and the last loss terms.
     """
     robot = get_robot(robot)
-    settings = {"robot": robot.name, "num_robots": int(num_robots), "hidden": int(hidden), "num_layers": int(num_layers),
+    settings = {"robot": robot.name, "num_robots": int(num_robots), "hidden": int(hidden),
+                "num_layers": int(num_layers),
                 "lr": float(lr), "batch_size": int(batch_size), "gamma": float(gamma), "tau": float(tau),
                 "alpha_init": float(alpha_init), "updates_per_frame": float(updates_per_frame),
                 "init_random_frames": int(init_random_frames), "buffer_size": int(buffer_size),
@@ -268,7 +269,8 @@ def evaluate_velocity_tracking(low_level: LowLevel, commands: np.ndarray, *, num
             for c, v, w, e, y, f in zip(commands, velocity, yaw_rate, linear_error, yaw_error, fell)]
     upright = ~fell
     pick = upright if upright.any() else np.ones_like(upright)
-    summary = {"linear_error_mean": float(linear_error[pick].mean()), "linear_error_max": float(linear_error[pick].max()),
+    summary = {"linear_error_mean": float(linear_error[pick].mean()),
+               "linear_error_max": float(linear_error[pick].max()),
                "yaw_rate_error_mean": float(yaw_error[pick].mean()), "fall_rate": float(fell.mean()),
                "linear_error_standing": float(np.linalg.norm(commands[:, :2], axis=-1).mean()),
                "yaw_rate_error_standing": float(np.abs(commands[:, 2]).mean()), "num_commands": len(commands)}

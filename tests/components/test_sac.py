@@ -78,7 +78,8 @@ def test_each_loss_term_trains_its_own_parameters():
     actor_params = list(agent.loss.actor_network_params.values(True, True))
     out["loss_qvalue"].backward(retain_graph=True)
     assert all(p.grad is None or p.grad.abs().sum() == 0 for p in actor_params), "the Q loss must not move the actor"
-    assert any(p.grad is not None and p.grad.abs().sum() > 0 for p in agent.loss.qvalue_network_params.values(True, True))
+    q_params = agent.loss.qvalue_network_params.values(True, True)
+    assert any(p.grad is not None and p.grad.abs().sum() > 0 for p in q_params)
 
 
 def test_same_seed_same_agent_and_updates():
