@@ -6,8 +6,10 @@ on this machine.
     ./run.sh bench --check                          # exit 1 when a target ratio is missed
 
 Simulation: batched simulator vs native mujoco.rollout vs a naive TorchRL loop. Planning: one MPC call vs the bare
-model forward pass. The IK baseline's low level vs LAT's (dynamics data and an evaluation-sized closed loop). LAT
-end to end at paper scale is timed by the recipe itself (report.json, stage_seconds).
+model forward pass. The IK baseline's low level vs LAT's (dynamics data and an evaluation-sized closed loop). SAC:
+one SAC update vs a plain update of the same networks (bench_sac.py, more options there). Studies: a study through
+Ray vs the same jobs one by one (bench_study.py, run on its own: it takes minutes). LAT end to end at paper scale is
+timed by the recipe itself (report.json, stage_seconds).
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ import sys
 
 import bench_ik
 import bench_planner
+import bench_sac
 import bench_sim
 from bench_cli import check_robot_names, positive_int as _positive_int
 
@@ -56,8 +59,12 @@ def main(argv=None) -> int:
     ik_rows = [row for name in args.robots for row in bench_ik.benchmark_robot(name)]
     print()
     print(bench_ik.format_table(ik_rows))
+    print("\nbenchmarking one SAC update ...", flush=True)
+    sac_rows = [bench_sac.benchmark_update(size, size, 1, repeats=args.repeats, before=True) for size in (256, 512)]
+    print()
+    print(bench_sac.format_updates(sac_rows))
     if args.check and (not bench_sim.targets_met(rows) or any(r.ratio > 2.0 for r in planner_rows)
-                       or not bench_ik.targets_met(ik_rows)):
+                       or not bench_ik.targets_met(ik_rows) or any(r.ratio > bench_sac.TARGET_RATIO for r in sac_rows)):
         return 1
     return 0
 

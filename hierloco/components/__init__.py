@@ -5,7 +5,8 @@
 - ``low_level``: latent, expert-replay and command low levels. ``dynamics_data``: random-action transitions.
 - ``com_model``: the local-frame CoM dynamics model. ``planners``: random shooting, CEM, MPPI, exhaustive MPC.
 - ``policies``: the task-policy protocol of closed-loop evaluation. ``evaluation``: closed-loop task episodes and
-  gait-policy checks. ``sac``: the SAC high level.
+  gait-policy checks. ``sac``: the SAC agent and its batched training loop. ``sac_low_level``: SAC-SAC's 100 Hz
+  velocity-tracking low level and its tracking evaluation.
 """
 
 from hierloco.components.com_model import (
@@ -32,14 +33,15 @@ from hierloco.components.planners import (
     RandomShootingPlanner,
 )
 from hierloco.components.policies import ActorPolicy, TaskPolicy
-from hierloco.components.sac import SACAgent
+from hierloco.components.sac import SACAgent, train_sac
+from hierloco.components.sac_low_level import SACLowLevel, TrainedSACLowLevel, train_sac_low_level
 
 __all__ = [
     "PLANNERS", "ActorPolicy", "BoxCEMPlanner", "BoxMPPIPlanner", "BoxPlannerBase", "CoMDynamicsModel",
     "CommandLowLevel", "ExhaustivePlanner", "ExpertLibrary", "ExpertReplayLowLevel", "LatentGaitPolicy",
     "LatentLowLevel", "LegKinematics", "LowLevel", "RaibertController", "RandomShootingPlanner", "SACAgent",
-    "TaskPolicy", "TaskRollout", "TrainedCoMModel", "TrainedGaitPolicy", "TransitionData", "UniformActionPolicy",
+    "SACLowLevel", "TaskPolicy", "TaskRollout", "TrainedCoMModel", "TrainedGaitPolicy", "TrainedSACLowLevel", "TransitionData", "UniformActionPolicy",
     "action_motion", "apply_delta", "build_expert_library", "check_gait_policy", "collect_transitions",
     "holdout_split", "latent_grid_paths", "local_transition", "run_closed_loop", "run_task", "train_com_model",
-    "train_gait_policy",
+    "train_gait_policy", "train_sac", "train_sac_low_level",
 ]

@@ -1,5 +1,5 @@
 """Robots, the locomotion environments (dm_control and TorchRL), transforms, the batched simulator, the
-latent-action and world-model environments, the tasks and navigation arenas.
+latent-action, velocity-command and world-model environments, the tasks and navigation arenas.
 
 Importing it does not import :mod:`hierloco.components` (the low levels, models and planners that plug into these
 environments).
@@ -43,13 +43,14 @@ from hierloco.envs.transforms import (
     TaskTransform,
     task_transforms,
 )
+from hierloco.envs.velocity_command_env import VelocityCommandEnv
 from hierloco.envs.world_model import CoMWorldModelEnv
 
 __all__ = [
     "TASKS", "Arena", "BatchedSimulator", "CoMState", "CoMWorldModelEnv", "ContinueAfterFalls", "DisableLegs",
     "GoalObservation", "GoalReaching", "LatentActionEnv", "LocomotionEnv", "LocomotionPhysics", "LocomotionTask",
     "LowLevel", "Obstacle", "RobotSpec", "SimulationResult", "Task", "TaskEpisode", "TaskResult", "TaskReward",
-    "TaskTransform", "TrajectoryTracking", "VelocityTracking", "available_cores", "clamp_joint_targets",
+    "TaskTransform", "TrajectoryTracking", "VelocityCommandEnv", "VelocityTracking", "available_cores", "clamp_joint_targets",
     "clearance", "cluttered_arena", "compile_model", "get_robot", "joint_target_limits", "make_dm_env", "make_env",
     "make_task", "periods_per_action", "plan_path", "register_robot", "reset_joint_noise", "robot_from_mjcf",
     "robot_has_fallen", "s_path", "task_options", "task_transforms",

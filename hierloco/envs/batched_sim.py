@@ -69,6 +69,8 @@ class SimulationResult:
         fallen: ``B x T`` bool, true from the first step the robot fell (roll, pitch or height out of limits).
         unstable: ``B x T`` bool, true from the first step the physics blew up (NaN or MuJoCo auto-reset).
         qpos: ``B x T x nq`` the full generalised positions (for rendering).
+        joint_velocities: ``B x T x J`` in rad/s, ``robot.joint_names`` order.
+        angular_velocity_local: ``B x T x 3`` base angular velocity in the base (body) frame, rad/s.
     """
 
     com_state: np.ndarray
@@ -81,11 +83,23 @@ class SimulationResult:
     fallen: np.ndarray
     unstable: np.ndarray
     qpos: np.ndarray
+    joint_velocities: np.ndarray
+    angular_velocity_local: np.ndarray
 
     @property
     def failed(self) -> np.ndarray:
         """``B x T`` bool: fallen or unstable."""
         return self.fallen | self.unstable
+
+    @classmethod
+    def concatenate(cls, results: Sequence["SimulationResult"]) -> "SimulationResult":
+        """Successive results of the same copies (``B x T_i`` each) as one ``B x sum(T_i)`` result; ``fallen`` and
+        ``unstable`` stay true from their first step on."""
+        merged = cls(**{name: np.concatenate([getattr(r, name) for r in results], axis=1)
+                        for name in cls.__dataclass_fields__})
+        merged.fallen = np.logical_or.accumulate(merged.fallen, axis=1)
+        merged.unstable = np.logical_or.accumulate(merged.unstable, axis=1)
+        return merged
 
 
 class BatchedSimulator:
@@ -179,6 +193,12 @@ class BatchedSimulator:
         """``B x J`` current joint angles in rad."""
         return self.state[:, self._qpos][:, self._joint_qpos]
 
+    @property
+    def qvel(self) -> np.ndarray:
+        """``B x nv`` current generalised velocities (the free joint's ``0:3`` in the world frame in m/s, ``3:6``
+        in the base frame in rad/s)."""
+        return self.state[:, self._qvel]
+
     # ------------------------------------------------------------------ simulation
     def run(self, joint_targets: np.ndarray) -> SimulationResult:
         """Runs ``B x T x J`` joint targets (rad, one per control step) on every copy, from its current state.
@@ -228,6 +248,8 @@ class BatchedSimulator:
             fallen=fallen,
             unstable=unstable,
             qpos=qpos,
+            joint_velocities=qvel[..., self._joint_qvel],
+            angular_velocity_local=qvel[..., 3:6],
         )
 
     def close(self) -> None:

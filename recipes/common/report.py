@@ -43,9 +43,7 @@ def task_evaluation(rollout, task, *, method: str, robot: str, setting: str, see
 
 def log_evaluation(logger, evaluation: TaskEvaluation, setting: str, name: str) -> None:
     prefix = f"eval/{setting}/{name}"  # the logger cleans names (goal_reaching_1.5m -> goal_reaching_1p5m)
-    logger.log_metrics({f"{prefix}/{key}": value for key, value in evaluation.metrics.items()
-                        if key != "plan_seconds"})
-    logger.log_scalar(f"time/{setting}/{name}/plan_seconds", evaluation.metrics["plan_seconds"])
+    logger.log_metrics({f"{prefix}/{key}": value for key, value in evaluation.metrics.items()})
 
 
 def task_figures(evaluation: TaskEvaluation, task, robot, figures: Path, *, method: str, setting: str,

@@ -38,6 +38,38 @@ def is_training(name: str) -> bool:
     return not name.startswith("evaluation_")
 
 
+WALL_CLOCK_KEYS = ("train_seconds", "seconds", "plan_seconds")
+
+
+def strip_wall_clock(value):
+    """``value`` (metadata: dicts and lists) without its wall-clock entries, and those entries: artifacts hold only
+    what the same command reproduces byte for byte; timings go to ``report.json``."""
+    if isinstance(value, dict):
+        kept, removed = {}, {}
+        for key, item in value.items():
+            if key in WALL_CLOCK_KEYS:
+                removed[key] = item
+            else:
+                kept[key], inner = strip_wall_clock(item)
+                if inner:
+                    removed[key] = inner
+        return kept, removed
+    if isinstance(value, list) and any(isinstance(item, dict) for item in value):
+        pairs = [strip_wall_clock(item) for item in value]
+        return [kept for kept, _ in pairs], ([removed for _, removed in pairs] if any(r for _, r in pairs) else {})
+    return value, {}
+
+
+def _save_without_wall_clock(artifact, path, timings: dict) -> None:
+    for field in ("metadata", "metrics"):
+        if isinstance(getattr(artifact, field, None), dict):
+            kept, removed = strip_wall_clock(getattr(artifact, field))
+            setattr(artifact, field, kept)
+            if removed:
+                timings[field] = removed
+    artifact.save(path)
+
+
 def default_threads() -> int:
     """The cores this process may use (its CPU affinity), the default number of simulation threads."""
     try:
@@ -102,8 +134,12 @@ class Run:
         if EVALUATE and is_training(name) and not self.dir.check(name, stage.key, stage.filename):
             raise ConfigError(f"stage {name!r} is not finished in {self.path}: train the run first (train.py)")
         CURRENT["stage"] = name
+        timings: dict = {}
         artifact = self.dir.stage(name, stage.key, lambda: build(self, stage.params, *inputs),
-                                  lambda a, path: a.save(path), stage.artifact.load, stage.filename)
+                                  lambda a, path: _save_without_wall_clock(a, path, timings), stage.artifact.load,
+                                  stage.filename)
+        if timings:
+            self.reports.setdefault("timings", {})[name] = timings
         if stage.check is not None:
             stage.check(self, artifact)
         if isinstance(artifact, TaskEvaluation):
@@ -155,6 +191,9 @@ class Run:
         write_text(self.out / "config.yaml", OmegaConf.to_yaml(self.cfg, resolve=True))
         for stage, seconds in self.dir.timings.items():
             self.logger.log_scalar(f"time/{stage}", seconds)
+            plan = self.reports.get("timings", {}).get(stage, {}).get("metrics", {}).get("plan_seconds")
+            if plan is not None:  # one planner call, in s
+                self.logger.log_scalar(f"time/{stage}/plan_seconds", plan)
         if rows:
             self.logger.log_table("eval/results", rows)
         self.logger.summary({"headline_normalized_cost": headline,
