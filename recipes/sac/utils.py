@@ -1,6 +1,6 @@
-"""Factories of the SAC recipe: its plan of stages, the training env and the evaluation of a trained policy (each
-task trains on its own ``training_split()``, half of its targets). The LAT low level comes from the shared stages (``recipes/common/stages.py``); the
-SAC training loop is in ``train.py``."""
+"""Factories of the SAC recipe: its plan of stages, the SAC high level (its env, its training, its evaluation) and
+its config checks. The high level is shared with ``recipes/sac_sac``, whose low level differs (a SAC velocity policy
+instead of ``pi(., z)``). Each task trains on its own ``training_split()``, half of its targets."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from torchrl.envs import Compose, TransformedEnv
 
 from hierloco.components.evaluation import run_task
 from hierloco.components.policies import ActorPolicy
-from hierloco.components.sac import SACAgent
+from hierloco.components.sac import SACAgent, train_sac
 from hierloco.envs.latent_env import LatentActionEnv
 from hierloco.envs.tasks import Task
 from hierloco.envs.transforms import GoalObservation, task_transforms
@@ -22,6 +22,11 @@ METHOD = "sac"
 def checks(c: config.Checker, robot) -> None:
     config.check_experts(c, robot)
     config.check_policy(c)
+    check_high_level(c)
+
+
+def check_high_level(c: config.Checker) -> None:
+    """The checks of the SAC high level (this recipe's and SAC-SAC's), its tasks and its logger."""
     config.check_eval(c)
     config.check_logger(c)
     for key in ("sac.total_frames", "sac.num_robots", "sac.batch_size", "sac.hidden", "sac.buffer_size"):
@@ -31,18 +36,23 @@ def checks(c: config.Checker, robot) -> None:
         c.positive(key)
     c.fraction("sac.gamma")
     if list(c.cfg.settings) != ["normal"]:
-        c.fail(f"the SAC recipe runs the normal setting only, got settings={list(c.cfg.settings)}")
+        c.fail(f"the SAC high level runs the normal setting only, got settings={list(c.cfg.settings)}")
 
 
 def plan(cfg, robot) -> list[stages.Stage]:
-    """Experts -> gait policy -> its check -> per main task: a SAC agent, and its evaluation on every task of the
-    same kind (the main task and its generalisation variants)."""
+    """Experts -> gait policy -> its check -> the SAC high level per main task, over z."""
     from hierloco.envs.robots import robot_fingerprint
 
     experts = stages.experts_stage(cfg, robot_fingerprint(robot))
     policy = stages.gait_policy_stage(cfg, experts)
-    low_level = stages.latent_low_level(policy)
-    planned = [experts, policy, stages.gait_policy_check_stage(cfg, policy)]
+    return [experts, policy, stages.gait_policy_check_stage(cfg, policy),
+            *high_level_stages(cfg, stages.latent_low_level(policy))]
+
+
+def high_level_stages(cfg, low_level: dict) -> list[stages.Stage]:
+    """Per main task a SAC agent (``sac_<task>``), then its evaluation on every task of the same kind (the main
+    task and its generalisation variants)."""
+    planned = []
     specs = stages.task_specs(cfg)
     for name in cfg.eval.tasks:
         agent = sac_stage(cfg, name, specs[name], low_level)
@@ -60,7 +70,7 @@ def task_kind(name: str, spec: dict) -> str:
 def sac_stage(cfg, name: str, spec: dict, low_level: dict) -> stages.Stage:
     params = {"seed": cfg.seed, "device": cfg.device, "task_name": name, "task": spec, **section(cfg, "sac")}
     return stages.Stage(f"sac_{name}", params, {"low_level": low_level}, f"sac_{name}.pt", SACAgent,
-                        None)  # built by the training loop in train.py
+                        train_high_level)
 
 
 def sac_evaluation_stage(cfg, name: str, spec: dict, agent: stages.Stage) -> stages.Stage:
@@ -78,11 +88,32 @@ def task_env(low_level, task: Task, num_robots: int, seed: int, nthread: int | N
     return TransformedEnv(env, Compose(task_transforms(task, episodes), GoalObservation(task)))
 
 
-def build_evaluation(run, params, agent: SACAgent, low_level) -> stages.TaskEvaluation:
+def train_high_level(run, params, make_low_level) -> SACAgent:
+    """Goal-conditioned SAC (TorchRL's ``SACLoss``, :func:`hierloco.components.sac.train_sac`) on the training half
+    of a task's targets, ``total_frames`` high-level actions collected on ``num_robots`` robots at once."""
+    task = make_task_from_spec(params["task_name"], params["task"]).training_split()
+    low_level = make_low_level(params["num_robots"])
+    agent = SACAgent.build(GoalObservation.SIZE, low_level.action_low, low_level.action_high, hidden=params["hidden"],
+                           lr=params["lr"], gamma=params["gamma"], tau=params["tau"], seed=params["seed"])
+    env = task_env(low_level, task, params["num_robots"], params["seed"], nthread=run.nthread)
+    try:
+        agent.metadata = train_sac(env, agent, total_frames=params["total_frames"],
+                                   init_random_frames=params["init_random_frames"],
+                                   updates_per_frame=params["updates_per_frame"], batch_size=params["batch_size"],
+                                   buffer_size=params["buffer_size"], log_every=max(params["num_robots"],
+                                                                                    params["total_frames"] // 20),
+                                   seed=params["seed"], progress=run.progress, logger=run.logger,
+                                   tag=f"sac_{params['task_name']}")
+    finally:
+        env.close()
+    return agent
+
+
+def build_evaluation(run, params, agent: SACAgent, make_low_level) -> stages.TaskEvaluation:
     """The trained policy (its mean action) on every target of a task, one robot per episode."""
     task = make_task_from_spec(params["task_name"], params["task"])
-    env = LatentActionEnv(low_level, num_robots=task.num_episodes, record=True, seed=params["seed"],
-                          nthread=run.nthread)
+    env = LatentActionEnv(make_low_level(task.num_episodes), num_robots=task.num_episodes, record=True,
+                          seed=params["seed"], nthread=run.nthread)
     try:
         rollout = run_task(env, ActorPolicy(agent.actor), task, transforms=[GoalObservation(task)],
                            progress=run.progress)
@@ -94,3 +125,11 @@ def build_evaluation(run, params, agent: SACAgent, low_level) -> stages.TaskEval
 
 def manifest(cfg, robot) -> dict:
     return {"low_level": {"kind": "latent"}}
+
+
+def make_low_level(run, trained):
+    """``pi(., z)``: one stateless low level serves any number of robots."""
+    from hierloco.components.low_level import LatentLowLevel
+
+    low_level = LatentLowLevel(trained, run.robot, device=run.cfg.device)
+    return lambda num_robots: low_level

@@ -21,7 +21,7 @@ def run(method, *overrides):
 
 
 @pytest.mark.parametrize("method, settings", [("lib", "[normal]"), ("ik", "[normal,legs_disabled]"),
-                                              ("sac", "[normal]")])
+                                              ("sac", "[normal]"), ("sac_sac", "[normal]")])
 def test_baseline_recipe_runs(method, settings, tmp_path):
     result = run(method, f"run_dir={tmp_path}", f"settings={settings}")
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
@@ -33,7 +33,14 @@ def test_baseline_recipe_runs(method, settings, tmp_path):
     assert expected <= {(r["setting"], r["task"]) for r in rows}  # (SAC's tiny preset adds generalisation tasks)
     assert all(r["method"] == method for r in rows)
     assert (tmp_path / "figures" / "normal_goal_reaching_paths.png").exists()
-    if method == "sac":  # one SAC agent per task, trained on half the targets
+    if method == "sac_sac":  # the SAC low level, reported on its own
+        import json
+
+        tracking = json.loads((tmp_path / "sac_low_level_tracking.json").read_text())
+        assert len(tracking["rows"]) == 27 and "fall_rate" in tracking["summary"]
+        assert (tmp_path / "videos" / "sac_low_level_walking.mp4").stat().st_size > 1000
+        assert (tmp_path / "sac_low_level.pt").exists() and not (tmp_path / "sac_low_level.training.pt").exists()
+    if method in ("sac", "sac_sac"):  # one SAC agent per task, trained on half the targets
         assert {p.name for p in tmp_path.glob("sac_*.pt")} == {f"sac_{t}.pt" for t in
                                                               ("velocity_tracking", "goal_reaching",
                                                                "trajectory_tracking")}

@@ -16,7 +16,7 @@ from omegaconf import OmegaConf, open_dict
 from recipes.common.config import prepare
 
 ROOT = Path(__file__).resolve().parents[2]
-RECIPES = ("lat", "lib", "ik", "sac")
+RECIPES = ("lat", "lib", "ik", "sac", "sac_sac")
 # what changes no artifact: where results go, how they are shown, how fast they are computed
 NOT_IN_KEYS = ("run_dir", "progress", "nthread", "preset_name", "logger.", "eval.figures", "eval.videos")
 
@@ -46,7 +46,7 @@ def leaves(node, prefix=""):
             yield f"{prefix}{key}", value
 
 
-NO_OTHER_VALUE = {("lib", "planner.name"), ("sac", "settings")}  # LIB has one planner, SAC one setting
+NO_OTHER_VALUE = {("lib", "planner.name"), ("sac", "settings"), ("sac_sac", "settings")}  # one planner, one setting
 SPECIAL = {"steps_per_action": 200, "policy.latent_dim": 3, "planner.name": "cem", "robot": "daisy",
            "settings": ["legs_disabled"], "device": None, "planner.top_k": 20,
            "sac.gamma": 0.9, "dynamics.holdout": 0.2}

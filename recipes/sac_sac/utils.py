@@ -1,0 +1,91 @@
+"""Factories of the SAC-SAC recipe: its plan of stages (the SAC low level, its tracking report, then the SAC high
+level per task as in ``recipes/sac``), its low level and its config checks."""
+
+from __future__ import annotations
+
+from hierloco.components.sac_low_level import (
+    SACLowLevel,
+    TrainedSACLowLevel,
+    command_grid,
+    evaluate_velocity_tracking,
+    train_sac_low_level,
+)
+from recipes.common import config, stages
+from recipes.sac import utils as sac
+
+METHOD = "sac_sac"
+
+
+class TrackingReport(stages.JsonReport):
+    SCHEMA = {"rows": list, "summary": dict}
+
+
+def checks(c: config.Checker, robot) -> None:
+    config.check_experts(c, robot, library=False)
+    sac.check_high_level(c)
+    for key in ("low_level.total_frames", "low_level.num_robots", "low_level.hidden", "low_level.batch_size",
+                "low_level.buffer_size", "low_level.checkpoint_every", "tracking.points_per_axis",
+                "tracking.num_actions"):
+        c.integer(key)
+    c.integer("low_level.init_random_frames", minimum=0)
+    for key in ("low_level.lr", "low_level.updates_per_frame", "low_level.action_scale", "low_level.command_interval",
+                "low_level.episode_length"):
+        c.positive(key)
+
+
+def plan(cfg, robot) -> list[stages.Stage]:
+    """SAC low level -> its tracking report -> per main task: a SAC high level over the command, its evaluations."""
+    from hierloco.envs.robots import robot_fingerprint
+
+    low = stages.Stage("sac_low_level", {"seed": cfg.seed, **config.section(cfg, "low_level")},
+                       {"robot": robot_fingerprint(robot)}, "sac_low_level.pt", TrainedSACLowLevel, build_low_level)
+    report = stages.Stage("sac_low_level_tracking", {"seed": cfg.seed, "steps_per_action": cfg.steps_per_action,
+                                                     **config.section(cfg, "tracking")},
+                          {"sac_low_level": low.digest}, "sac_low_level_tracking.json", TrackingReport, build_tracking)
+    low_level = {"kind": "sac_command", "sac_low_level": low.digest, "steps_per_action": cfg.steps_per_action}
+    return [low, report, *sac.high_level_stages(cfg, low_level)]
+
+
+def build_low_level(run, params) -> TrainedSACLowLevel:
+    """SAC on many robots at once, one 100 Hz control step per env step; checkpointed as it trains, so a killed run
+    resumes from its last checkpoint (the checkpoint is removed once the stage is saved)."""
+    checkpoint = run.path / "sac_low_level.training.pt"
+    trained = train_sac_low_level(run.robot, checkpoint_path=checkpoint, nthread=run.nthread, progress=run.progress,
+                                  logger=run.logger, log_every=max(params["num_robots"], params["total_frames"] // 50),
+                                  **params)
+    checkpoint.unlink(missing_ok=True)  # the training state (with its replay buffer) is not needed any more
+    return trained
+
+
+def build_tracking(run, params, low_level) -> TrackingReport:
+    """The low level on its own: commanded against achieved velocity on a grid over the command box, and falls."""
+    commands = command_grid(run.robot, params["points_per_axis"])
+    report = evaluate_velocity_tracking(low_level(len(commands)), commands, num_actions=params["num_actions"],
+                                        seed=params["seed"], nthread=run.nthread)
+    walking_video(run, low_level(1), run.path / "videos" / "sac_low_level_walking.mp4")
+    return TrackingReport(report)
+
+
+def walking_video(run, low_level, path) -> None:
+    """The low level walking forward, left, backward and right (two actions each, the box's half speeds), rendered
+    to ``path``."""
+    import numpy as np
+
+    from hierloco.envs.batched_sim import BatchedSimulator
+    from hierloco.render import render_frames, save_video
+
+    half = 0.5 * np.asarray(run.robot.command_high)
+    sim = BatchedSimulator(run.robot, 1, nthread=1)
+    qpos = [low_level.run(sim, np.array([[half[0] * vx, half[1] * vy, 0.0]])).qpos[0]
+            for vx, vy in [(1, 0), (1, 0), (0, 1), (0, 1), (-1, 0), (-1, 0), (0, -1), (0, -1)]]
+    sim.close()
+    save_video(render_frames(run.robot, np.concatenate(qpos)[::5]), path, fps=20)
+
+
+def manifest(cfg, robot) -> dict:
+    return {"low_level": {"kind": "sac_command", "options": {"steps_per_action": cfg.steps_per_action}}}
+
+
+def make_low_level(run, trained: TrainedSACLowLevel):
+    """The trained velocity policy as a low level; it keeps a clock per robot, so each env gets its own."""
+    return lambda num_robots: SACLowLevel(trained, steps_per_action=run.cfg.steps_per_action)
