@@ -1,6 +1,7 @@
 """Evaluate a trained SAC run on any tasks, never touching a training stage (see ``recipes/common/evaluate.py``).
 
-    python recipes/sac/evaluate.py run_dir=outputs/sac/paper/a1_seed0 '+eval.tasks.goal_reaching_5m={task: goal_reaching, radius: 5}'
+    python recipes/sac/evaluate.py run_dir=outputs/sac/paper/a1_seed0 \
+        '+eval.tasks.goal_reaching_5m={task: goal_reaching, radius: 5}'
 """
 
 import hierloco  # noqa: F401  (first: headless MuJoCo rendering is set before anything loads MuJoCo)

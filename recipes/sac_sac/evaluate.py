@@ -1,0 +1,12 @@
+"""Evaluate a trained SAC_SAC run on any tasks, never touching a training stage (see ``recipes/common/evaluate.py``).
+
+    python recipes/sac_sac/evaluate.py run_dir=outputs/sac_sac/paper/a1_seed0 \
+        '+eval.tasks.goal_reaching_5m={task: goal_reaching, radius: 5}'
+"""
+
+import hierloco  # noqa: F401  (first: headless MuJoCo rendering is set before anything loads MuJoCo)
+from recipes.common.evaluate import evaluate_main
+from train import main
+
+if __name__ == "__main__":
+    evaluate_main(main.body)
