@@ -86,7 +86,7 @@ class TrainedRun:
         return path
 
     def low_level(self, num_robots: int = 1):
-        """The trained low level (LAT: ``pi(., z)``; LIB: expert replay; IK: the expert controller for
+        """The trained low level (LAT and SAC: ``pi(., z)``; LIB: expert replay; IK: the expert controller for
         ``num_robots`` robots; SAC-SAC: the SAC velocity policy)."""
         kind = self.manifest["low_level"]["kind"]
         if kind == "latent":
@@ -104,6 +104,11 @@ class TrainedRun:
 
             options = self.manifest["low_level"]["options"]
             return CommandLowLevel(self.robot, num_robots, **options)
+        if kind == "sac_command":
+            from hierloco.components.sac_low_level import SACLowLevel, TrainedSACLowLevel
+
+            options = self.manifest["low_level"].get("options", {})
+            return SACLowLevel(TrainedSACLowLevel.load(self._artifact("sac_low_level.pt")), **options)
         raise ArtifactError(f"{self.path / MANIFEST}: unknown low level kind {kind!r}")
 
     def com_model(self, setting: str = "normal"):
