@@ -280,6 +280,7 @@ def test_wandb_online_without_a_network(tmp_path, wandb_home):
     _check_fallback(seconds, backends, experiment_dir, stderr, reason="")
 
 
+@pytest.mark.slow
 def test_wandb_online_with_a_server_that_never_answers(tmp_path, wandb_home, loopback_server):
     """The server accepts the connection and then stays silent: wandb.init's timeout ends the wait."""
     url, connections = loopback_server

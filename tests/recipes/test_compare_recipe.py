@@ -6,6 +6,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from hierloco.results import read_csv
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -52,6 +54,7 @@ def test_compare_through_ray_equals_the_jobs_one_by_one(tmp_path):
     assert comparable(read_csv(by_ray / "out" / "comparison.csv")) == comparable(through_ray)
 
 
+@pytest.mark.slow
 def test_a_failed_job_is_reported_and_the_others_go_on(tmp_path):
     result = compare(tmp_path, f"out_dir={tmp_path / 'out'}", "methods=[lib,ik]", "seeds=[0]",
                      '+method_overrides.ik=["dynamics.num_transitions=5"]')

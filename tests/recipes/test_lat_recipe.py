@@ -81,10 +81,14 @@ def test_corrupted_artifact_is_named(tiny_run, tmp_path):
     assert result.returncode == 2 and "corrupted" in result.stderr and "gait_policy.pt" in result.stderr
 
 
+SLOW = pytest.mark.slow  # the same checks as test_user_errors.py, here in a process of their own
+
+
 @pytest.mark.parametrize("override, message", [("robot=spot", "unknown robot"),
-                                               ("planner.name=magic", "unknown planner"),
-                                               ("dynamics.num_transitions=-5", "num_transitions"),
-                                               ("settings=[broken]", "unknown setting")])
+                                               pytest.param("planner.name=magic", "unknown planner", marks=SLOW),
+                                               pytest.param("dynamics.num_transitions=-5", "num_transitions",
+                                                            marks=SLOW),
+                                               pytest.param("settings=[broken]", "unknown setting", marks=SLOW)])
 def test_bad_config_is_refused_before_any_work(tmp_path, override, message):
     run_dir = tmp_path / "never"
     result = run(f"run_dir={run_dir}", override)
@@ -133,6 +137,7 @@ def test_evaluate_adds_a_task_without_touching_training(tiny_run, tmp_path):
     assert refused.returncode == 2 and "evaluate.py changes only" in refused.stderr
 
 
+@pytest.mark.slow
 def test_a_finished_run_renders_a_video_it_did_not_render(tiny_run, tmp_path):
     import shutil
 
@@ -146,7 +151,7 @@ def test_a_finished_run_renders_a_video_it_did_not_render(tiny_run, tmp_path):
     assert (copy / "videos" / "normal_trajectory_tracking.mp4").stat().st_size > 1000
 
 
-@pytest.mark.parametrize("content", ["[]", "{", '{"a": 1}'])
+@pytest.mark.parametrize("content", ["[]", pytest.param("{", marks=SLOW), pytest.param('{"a": 1}', marks=SLOW)])
 def test_a_bad_json_artifact_is_refused_before_outputs_are_rewritten(tiny_run, tmp_path, content):
     import shutil
 
@@ -199,6 +204,7 @@ def test_a_second_run_into_the_same_directory_is_refused_at_once(tmp_path):
         first.wait()
 
 
+@pytest.mark.slow
 def test_interrupt_says_where_and_rerun_resumes_identically(tiny_run, tmp_path):
     import signal
 
@@ -237,6 +243,7 @@ def test_sigkill_then_resume_is_byte_identical(tiny_run, tmp_path):
     assert not [p for p in run_dir.rglob(".*") if ".tmp" in p.name], "a killed write's temporary file was left"
 
 
+@pytest.mark.slow
 def test_a_sweep_gives_each_job_its_own_run_directory(tmp_path):
     env = {**os.environ, "WANDB_MODE": "offline"}
     result = subprocess.run([sys.executable, str(TRAIN), "-m", "preset=tiny", "progress=false", "eval.videos=[]",
@@ -244,5 +251,6 @@ def test_a_sweep_gives_each_job_its_own_run_directory(tmp_path):
                              "planner.name=random_shooting,cem"], cwd=tmp_path, env=env, capture_output=True,
                             text=True, timeout=900)
     assert result.returncode == 0, result.stderr[-3000:]
-    runs = sorted(p.parent.name for p in (tmp_path / "outputs" / "lat" / "tiny").rglob("results.csv"))
-    assert runs == ["planner.name=cem", "planner.name=random_shooting"]
+    runs = sorted(p.parent.name for p in (tmp_path / "outputs" / "lat" / "tiny" / "a1_seed0").glob("*/results.csv"))
+    common = "eval.figures=False,eval.generalization=null,eval.videos=[],planner.name={},preset=tiny,progress=False"
+    assert runs == [common.format("cem"), common.format("random_shooting")]

@@ -18,7 +18,8 @@ from recipes.common.config import prepare
 ROOT = Path(__file__).resolve().parents[2]
 RECIPES = ("lat", "lib", "ik", "sac", "sac_sac")
 # what changes no artifact: where results go, how they are shown, how fast they are computed
-NOT_IN_KEYS = ("run_dir", "progress", "nthread", "preset_name", "logger.", "eval.figures", "eval.videos")
+NOT_IN_KEYS = ("run_dir", "progress", "nthread", "preset_name", "logger.", "eval.figures", "eval.videos",
+               "checks.")  # checks stop a run; they change no artifact
 
 
 CONFIGS: dict = {}
@@ -109,7 +110,7 @@ def test_the_right_stages_change():
     assert changed_stages("ik", "seed", 1) == ik
     assert changed_stages("ik", "steps_per_action", 200) == ik
     assert changed_stages("lib", "experts.num_experts", 5) == {"experts", *ik}
-    sac = changed_stages("sac", "sac.lr", 1e-3)
+    sac = changed_stages("sac", "sac.lr", 2e-3)
     assert sac == {f"sac_{t}" for t in ("velocity_tracking", "goal_reaching", "trajectory_tracking")} | evaluations
 
 

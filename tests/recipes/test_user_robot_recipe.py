@@ -92,12 +92,14 @@ def test_experts_that_do_not_walk_as_commanded_stop_the_run(robot_yaml, tmp_path
     assert not (run_dir / "gait_policy.pt").exists()  # stopped before learning from them
 
 
+@pytest.mark.slow
 def test_a_gait_policy_that_reproduces_too_few_experts_stops_the_run(tmp_path):
     result = lat(f"run_dir={tmp_path / 'run'}", "checks.min_reproduced_fraction=0.9")
     assert result.returncode == 2 and "the gait policy reproduces" in result.stderr, result.stderr
     assert not (tmp_path / "run" / "dynamics_data_normal.npz").exists()
 
 
+@pytest.mark.slow
 def test_a_yaml_robot_runs_through_the_comparison_study(robot_yaml, tmp_path):
     """The robot reaches the study's Ray workers as a path (no Python of the user's anywhere)."""
     from hierloco.results import read_csv
