@@ -6,8 +6,9 @@ jobs on Ray, then the comparison table and bar charts.
     RAY_ADDRESS=ray://head:10001 python recipes/compare/run.py seeds=[0,1,2]
 
 Each method runs as its own recipe in its own run directory (``outputs/<method>/<preset>/<robot>_seed<seed>``), so
-finished runs are reused. Writes ``comparison.csv``, ``comparison.md``, ``wallclock.md`` and
-``comparison_<setting>.png`` in ``out_dir``.
+finished runs are reused. Writes ``comparison.csv``, ``comparison.md``, ``wallclock.md``,
+``comparison_<setting>.png`` and ``paper_check.md`` (the paper's claims beside our numbers, ``paper_check.py``) in
+``out_dir``.
 """
 
 import hierloco  # noqa: F401  (first: headless MuJoCo rendering is set before anything loads MuJoCo)
@@ -15,10 +16,12 @@ import hierloco  # noqa: F401  (first: headless MuJoCo rendering is set before a
 import sys
 from pathlib import Path
 
+from hierloco.io import write_text
 from recipes.common import studies
 from recipes.common.config import ConfigError, as_lists
 from recipes.common.entry import recipe_main
 from recipes.common.report import write_study_tables
+from recipes.compare import paper_check
 
 
 def check(cfg) -> list:
@@ -76,8 +79,11 @@ def main(cfg) -> None:
     if rows:
         table = write_study_tables(rows, results, Path(cfg.out_dir), name="comparison", settings=cfg.settings,
                                    title=f"Normalised cost ({cfg.preset_name} preset, {len(cfg.seeds)} seed(s))")
+        checks = paper_check.check_claims(rows)
+        write_text(Path(cfg.out_dir) / "paper_check.md", paper_check.paper_check_markdown(
+            checks, title=f"{cfg.preset_name} preset, seeds {list(cfg.seeds)}"))
         print("\n" + table)
-        print(f"comparison table and figures in {cfg.out_dir}/")
+        print(f"comparison table, figures and the paper's claims checked (paper_check.md) in {cfg.out_dir}/")
     if studies.report_failures(results):
         sys.exit(1)
 

@@ -46,6 +46,9 @@ def test_compare_through_ray_equals_the_jobs_one_by_one(tmp_path):
     table = (by_ray / "out" / "comparison.md").read_text()
     assert "| ik | a1 | normal | goal_reaching |" in table and "| lib | a1 | normal | goal_reaching |" in table
     assert (by_ray / "out" / "comparison_normal.png").read_bytes()[:4] == b"\x89PNG"
+    # without LAT in the study, the paper's claims about LAT cannot be checked, and say so
+    assert "| LIB is worse than LAT at velocity tracking | a1 | normal | velocity_tracking | - | " \
+           "lat 0.16 +- 0.10, lib 0.58 +- 0.01 | not measured |" in (by_ray / "out" / "paper_check.md").read_text()
     assert (by_ray / "outputs" / "lib" / "tiny" / "a1_seed1" / "job.json").exists()
 
     # a re-run (say, after the study was killed) reuses every finished job without submitting it
