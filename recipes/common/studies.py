@@ -132,12 +132,16 @@ def _reuse_stages(source: Path, target: Path, stages) -> None:
 
 
 def _progress(done: int, running: int, failed: int, pending: int, start: float, durations: list[float],
-              slots: int) -> str:
-    elapsed = time.perf_counter() - start
-    line = f"study: {done} done, {running} running, {failed} failed, {pending} pending; elapsed {elapsed / 60:.1f} min"
+              slots: int, finished_at: float) -> str:
+    """The study's progress line. The estimate is made when a job ends (the jobs still running then taken as half
+    done, each job as long as the mean of those that ran) and counts down from there."""
+    now = time.perf_counter()
+    line = (f"study: {done} done, {running} running, {failed} failed, {pending} pending; "
+            f"elapsed {(now - start) / 60:.1f} min")
     if durations and (running or pending):
         mean = sum(durations) / len(durations)
-        line += f", about {mean * (running / 2 + pending) / max(1, slots) / 60:.1f} min to go"
+        left = mean * (running / 2 + pending) / max(1, slots) - (now - finished_at)
+        line += f", about {left / 60:.1f} min to go" if left > 0 else ", taking longer than estimated"
     return line
 
 
@@ -173,6 +177,7 @@ def run_jobs(jobs: Sequence[Job], *, address: str | None = None, cores_per_job: 
         pending = {remote.options(num_cpus=jobs[i].cores).remote(jobs[i], fetch_run_dirs): i for i in todo}
         slots = max(1, int(ray.cluster_resources().get("CPU", 1)) // max(1, jobs[todo[0]].cores))
         start, last, durations = time.perf_counter(), 0.0, []
+        finished_at = start
         while pending:
             ready, _ = ray.wait(list(pending), num_returns=1, timeout=progress_every)
             for ref in ready:
@@ -188,13 +193,14 @@ def run_jobs(jobs: Sequence[Job], *, address: str | None = None, cores_per_job: 
                 results[index] = JobResult(job, outcome["ok"], outcome["rows"], outcome["seconds"],
                                            error=outcome["error"])
                 durations.append(outcome["seconds"])
+                finished_at = time.perf_counter()
                 if not outcome["ok"]:
                     print(f"study: job {job.method} {job.run_dir} failed: {outcome['error']}", flush=True)
             if time.perf_counter() - last >= progress_every or not pending:
                 failed = sum(not r.ok for r in results.values())
                 running = min(len(pending), slots)
                 print(_progress(len(results) - failed, running, failed, len(pending) - running, start, durations,
-                                slots), flush=True)
+                                slots, finished_at), flush=True)
                 last = time.perf_counter()
         if started_here:
             ray.shutdown()
