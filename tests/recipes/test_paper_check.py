@@ -34,3 +34,10 @@ def test_markdown_counts_and_quotes_the_paper():
     data = rows({"lat": [[0.2]], "lib": [[0.1]]})
     text = paper_check_markdown(check_claims(data), title="test")
     assert "lib 0.58 +- 0.01" in text and "| does not hold |" in text and "0 hold, 2 do not hold." in text
+
+
+def test_a_difference_within_the_tie_margin_is_no_win():
+    data = rows({"lat": [[0.60]], "ik": [[0.61]]}, setting="legs_disabled")
+    got = verdicts(check_claims(data))
+    assert got[("LAT beats IK with legs disabled", "legs_disabled", "velocity_tracking")].startswith(
+        "does not hold (a tie")
