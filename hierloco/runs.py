@@ -4,7 +4,8 @@ A stage is named, has a *key* (a JSON-able dict of everything that changes its a
 fingerprint, the digests of the stages it depends on) and a file. ``RunDirectory.stage(name, key, build, save, load,
 filename)`` returns the stage's result: loaded from disk when the artifact exists and was made with the same key,
 built (then saved atomically, key first) otherwise. An artifact made with another key is never overwritten: the run
-stops with an error naming the differences. :meth:`RunDirectory.verify` checks a whole plan of stages this way before
+stops with an error naming the differences. Each build's wall-clock is recorded in ``builds.json`` (stage -> seconds,
+threads, host, when), so a study that reuses a stage still reports what it cost. :meth:`RunDirectory.verify` checks a whole plan of stages this way before
 any work, so a refused run writes nothing. A killed run resumes at its first unfinished stage.
 
 One process at a time writes a run directory: :meth:`RunDirectory.acquire` takes an exclusive ``flock`` on
@@ -43,6 +44,7 @@ from hierloco.io import ArtifactError, write_text
 
 T = TypeVar("T")
 LOCK_NAME = ".lock"
+BUILDS_NAME = "builds.json"
 
 
 class ConfigMismatchError(ArtifactError):
@@ -123,6 +125,7 @@ class RunDirectory:
         self.readonly = bool(readonly)
         self.timings: dict[str, float] = {}
         self.reused: dict[str, bool] = {}
+        self.build_seconds: dict[str, float | None] = {}  # what building each stage took, when it was built
         self.current: str | None = None  # the stage being built or loaded
         self._lock_fd: int | None = None
 
@@ -185,6 +188,22 @@ class RunDirectory:
         self.release()
 
     # ------------------------------------------------------------------------------------------------ keys
+    def builds(self) -> dict[str, dict]:
+        """``builds.json``: stage -> ``{"seconds", "threads", "host", "finished"}`` of its last build (``{}`` if none
+        was recorded, as for runs made before it existed)."""
+        try:
+            builds = json.loads((self.path / BUILDS_NAME).read_text())
+        except (OSError, ValueError):
+            return {}
+        return builds if isinstance(builds, dict) else {}
+
+    def _record_build(self, name: str, seconds: float) -> None:
+        threads = os.environ.get("OMP_NUM_THREADS") or (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
+                                                        else os.cpu_count())
+        builds = {**self.builds(), name: {"seconds": round(seconds, 3), "threads": int(threads), "host": socket.gethostname(),
+                                          "finished": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}}
+        write_text(self.path / BUILDS_NAME, json.dumps(builds, indent=1, sort_keys=True))
+
     def key_path(self, filename: str) -> Path:
         return self.path / f"{filename}.key.json"
 
@@ -238,6 +257,7 @@ class RunDirectory:
         if self.check(name, key, filename):
             result = load(artifact)
             self.reused[name] = True
+            self.build_seconds[name] = self.builds().get(name, {}).get("seconds")
         else:
             if self.readonly:
                 raise ReadOnlyRunError(f"run directory {self.path} is read-only and stage {name!r} is not finished")
@@ -245,6 +265,8 @@ class RunDirectory:
             result = build()
             save(result, artifact)
             self.reused[name] = False
+            self.build_seconds[name] = time.perf_counter() - start
+            self._record_build(name, self.build_seconds[name])
         self.current = None
         self.timings[name] = time.perf_counter() - start
         return result

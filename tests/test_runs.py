@@ -54,6 +54,26 @@ def test_built_once_then_loaded(tmp_path):
     assert rerun.reused == {"numbers": True} and "numbers" in rerun.timings
 
 
+def test_a_build_s_wall_clock_is_recorded_and_reported_when_reused(tmp_path):
+    import time
+
+    def slow():
+        time.sleep(0.2)
+        return [7]
+
+    run = RunDirectory(tmp_path)
+    run.stage("slow", CONFIG, slow, Stage.save, Stage().load, "slow.json")
+    recorded = json.loads((tmp_path / "builds.json").read_text())["slow"]
+    assert 0.2 <= recorded["seconds"] < 5 and recorded["threads"] >= 1 and recorded["host"]
+    rerun = RunDirectory(tmp_path)
+    rerun.stage("slow", CONFIG, lambda: 1 / 0, Stage.save, Stage().load, "slow.json")
+    assert rerun.reused["slow"] and rerun.timings["slow"] < 0.2, "loading is not building"
+    assert rerun.build_seconds["slow"] == recorded["seconds"], "a reused stage reports what building it took"
+    with pytest.raises(ZeroDivisionError):
+        rerun.stage("broken", {"b": 1}, lambda: 1 / 0, Stage.save, Stage().load, "broken.json")
+    assert set(json.loads((tmp_path / "builds.json").read_text())) == {"slow"}, "a failed build records nothing"
+
+
 def test_other_stages_are_independent(tmp_path):
     run = RunDirectory(tmp_path)
     first, second = Stage([1]), Stage([2])

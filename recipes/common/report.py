@@ -117,12 +117,7 @@ def write_study_tables(rows: list[dict], results, out: Path, *, name: str, setti
     write_text(out / f"{name}.csv", csv_text(rows, columns))
     write_text(out / f"{name}.md", f"# {name.capitalize()}\n\n{title}. Normalised cost, mean +- std over targets and "
                                    "seeds (1 = no better than standing still).\n\n" + table)
-    lines = ["| method | run directory | wall-clock (min) | reused |", "|---|---|---|---|"]
-    for result in results:
-        seconds = result.seconds if not result.reused else _recorded_seconds(result.job.run_dir)
-        method = result.job.labels.get("method", result.job.method)
-        lines.append(f"| {method} | {result.job.run_dir} | {seconds / 60:.1f} | {'yes' if result.reused else 'no'} |")
-    write_text(out / "wallclock.md", "# Wall-clock per job\n\n" + "\n".join(lines) + "\n")
+    write_text(out / "wallclock.md", wallclock_markdown(results))
     for setting in settings:
         if any(r["setting"] == setting and r["task"] in tasks for r in rows):
             plot_comparison(rows, out / f"{name}_{setting}.png", setting=setting, tasks=tasks, title=title)
@@ -136,3 +131,51 @@ def _recorded_seconds(run_dir: str) -> float:
         return float(json.loads((Path(run_dir) / "job.json").read_text())["seconds"])
     except (OSError, ValueError, KeyError):
         return float("nan")
+
+
+def job_compute(run_dir: str) -> tuple[dict[str, float | None], dict]:
+    """The stages a finished run needs (its last ``report.json``) -> the seconds building each took (``None`` when
+    not recorded, as for stages built before ``builds.json`` existed), and ``builds.json`` itself."""
+    import json
+
+    from hierloco.runs import RunDirectory
+
+    builds = RunDirectory(run_dir, readonly=True).builds()
+    try:
+        stages = json.loads((Path(run_dir) / "report.json").read_text())["stage_seconds"]
+    except (OSError, ValueError, KeyError):
+        return {}, builds
+    return {name: builds.get(name, {}).get("seconds") for name in stages}, builds
+
+
+def wallclock_markdown(results) -> str:
+    """``wallclock.md``: each job's wall-clock in this study and the compute its stages took when they were built
+    (reused stages included), then the compute per method and robot, and what that is on the study's cores."""
+    lines = ["# Wall-clock per job", "",
+             "*this study*: the job's wall-clock now (a reused job or stage costs nothing); *compute*: the sum, over the "
+             "stages the job needs, of what building each took (`builds.json`), with the threads it had then.", "",
+             "| method | run directory | this study (min) | compute (min) | threads | stages not recorded | reused |",
+             "|---|---|---|---|---|---|---|"]
+    per_method: dict[tuple[str, str], list[float]] = {}
+    for result in results:
+        seconds = result.seconds if not result.reused else _recorded_seconds(result.job.run_dir)
+        method = result.job.labels.get("method", result.job.method)
+        stages, builds = job_compute(result.job.run_dir)
+        known = [v for v in stages.values() if v is not None]
+        missing = sum(v is None for v in stages.values())
+        threads = sorted({b.get("threads") for n, b in builds.items() if n in stages and b.get("threads")})
+        compute = sum(known) if stages else float("nan")
+        robot = Path(result.job.run_dir).name.rsplit("_seed", 1)[0]
+        if stages and not missing:
+            per_method.setdefault((method, robot), []).append(compute)
+        lines.append(f"| {method} | {result.job.run_dir} | {seconds / 60:.1f} | {compute / 60:.1f} | "
+                     f"{', '.join(map(str, threads)) or '-'} | {missing} | {'yes' if result.reused else 'no'} |")
+    if per_method:
+        lines += ["", "## Compute per method and robot (jobs with every stage recorded)", "",
+                  "| method | robot | jobs | compute per job (min) | compute in all (min) |", "|---|---|---|---|---|"]
+        for (method, robot), values in per_method.items():
+            lines.append(f"| {method} | {robot} | {len(values)} | {sum(values) / len(values) / 60:.1f} | "
+                         f"{sum(values) / 60:.1f} |")
+        total = sum(sum(v) for v in per_method.values())
+        lines += ["", f"In all {total / 60:.1f} min of compute."]
+    return "\n".join(lines) + "\n"

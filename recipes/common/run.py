@@ -185,6 +185,7 @@ class Run:
         self._figures_and_videos(low_level)
         self.reports["stage_seconds"] = self.dir.timings
         self.reports["reused_stages"] = self.dir.reused
+        self.reports["build_seconds"] = self.dir.build_seconds  # what each stage took when it was built
         self.reports["total_seconds"] = time.perf_counter() - self.start
         write_text(self.out / "report.json", json.dumps(self.reports, indent=2, default=float))
         table = write_results(self.out, rows)

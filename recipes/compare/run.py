@@ -48,6 +48,8 @@ def check(cfg) -> list:
         problems.append("seeds is empty")
     if not (isinstance(cfg.ray.cores_per_job, int) and cfg.ray.cores_per_job >= 1):
         problems.append(f"ray.cores_per_job must be an integer >= 1, got {cfg.ray.cores_per_job!r}")
+    if not isinstance(cfg.generalization, bool):
+        problems.append(f"generalization must be true or false, got {cfg.generalization!r}")
     if problems:
         raise ConfigError("bad config: " + "; ".join(problems))
     return robots
@@ -55,6 +57,7 @@ def check(cfg) -> list:
 
 def jobs(cfg, robots) -> list:
     planned = []
+    generalization = [] if cfg.generalization else ["eval.generalization=null"]
     for robot, spec in zip(cfg.robots, robots):
         for method in cfg.methods:
             settings = [s for s in cfg.settings if s == "normal" or method in cfg.adverse_methods]
@@ -64,7 +67,8 @@ def jobs(cfg, robots) -> list:
             for seed in cfg.seeds:
                 run_dir = Path("outputs") / method / cfg.preset_name / f"{spec.name}_seed{seed}"
                 overrides = [f"preset={cfg.preset_name}", f"robot={spec.reference}", f"seed={seed}",
-                             f"settings=[{','.join(settings)}]", "progress=false", *variant, *cfg.overrides,
+                             f"settings=[{','.join(settings)}]", "progress=false", *generalization, *variant,
+                             *cfg.overrides,
                              *cfg.method_overrides.get(method, [])]
                 planned.append(studies.Job(recipe, str(run_dir), overrides, labels={"method": method}))
     return planned

@@ -55,6 +55,14 @@ def test_compare_through_ray_equals_the_jobs_one_by_one(tmp_path):
     again = compare(by_ray, f"out_dir={by_ray / 'out'}")
     assert again.returncode == 0 and "study: 4 jobs, 4 reused" in again.stdout, again.stdout[-2000:]
     assert comparable(read_csv(by_ray / "out" / "comparison.csv")) == comparable(through_ray)
+    # reused jobs cost nothing now, and the wall-clock table still says what building their stages took
+    wallclock = (by_ray / "out" / "wallclock.md").read_text()
+    assert "| lib | a1 | 2 |" in wallclock and "| ik | a1 | 2 |" in wallclock, wallclock
+    assert wallclock.count("| 0 | yes |") == 4, wallclock  # every job reused, no stage without its build time
+    from recipes.common.report import job_compute
+
+    stages, _ = job_compute(str(by_ray / "outputs" / "ik" / "tiny" / "a1_seed0"))
+    assert "dynamics_data_normal" in stages and all(v is not None and v > 0 for v in stages.values()), stages
 
 
 @pytest.mark.slow

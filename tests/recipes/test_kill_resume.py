@@ -17,7 +17,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[2]
 ENV = {**os.environ, "WANDB_MODE": "offline"}
 # what a run writes that may differ run to run: the holder of the lock, logs, wall-clock timings
-VOLATILE = ("run.json", ".lock", "report.json")
+VOLATILE = ("run.json", ".lock", "report.json", "builds.json")
 
 RECIPES = {
     "lat": ["preset=tiny", "settings=[normal,legs_disabled]", "eval.videos=[]"],
