@@ -28,7 +28,7 @@ from hierloco.io import ArtifactError, check_schema, load_arrays, save_arrays, w
 
 RESULT_COLUMNS = ["method", "robot", "setting", "task", "seed", "normalized_cost", "success_rate", "final_error"]
 EPISODE_COLUMNS = ["method", "robot", "setting", "task", "seed", "episode", "normalized_cost", "success",
-                   "final_error", "path_distance"]
+                   "final_error", "path_distance", "steps_to_goal"]
 GROUP = ("method", "robot", "setting", "task")
 
 
@@ -59,8 +59,8 @@ def markdown_table(rows: Iterable[Mapping]) -> str:
     groups = defaultdict(list)
     for row in rows:
         groups[tuple(row[k] for k in GROUP)].append(row)
-    lines = ["| method | robot | setting | task | normalized cost | success | final error | seeds | path distance |",
-             "|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| method | robot | setting | task | normalized cost | success | final error | seeds | path distance | "
+             "steps to goal |", "|---|---|---|---|---|---|---|---|---|---|"]
     for key in sorted(groups):
         members = groups[key]
         cost = np.array([m["normalized_cost"] for m in members])
@@ -70,8 +70,10 @@ def markdown_table(rows: Iterable[Mapping]) -> str:
         success_text = "-" if np.all(np.isnan(success)) else f"{100 * np.nanmean(success):.0f}%"
         distance = np.array([m["path_distance"] for m in members if _number(m.get("path_distance"))], dtype=float)
         distance_text = f"{distance.mean():.2f} +- {distance.std():.2f}" if len(distance) else "-"
+        steps = np.array([m["steps_to_goal"] for m in members if _number(m.get("steps_to_goal"))], dtype=float)
+        steps_text = f"{steps.mean():.1f} +- {steps.std():.1f}" if len(steps) else "-"  # of the goals reached
         lines.append(f"| {' | '.join(map(str, key))} | {cost.mean():.2f} +- {cost.std():.2f} | {success_text} | "
-                     f"{error.mean():.2f} +- {error.std():.2f} | {seeds} | {distance_text} |")
+                     f"{error.mean():.2f} +- {error.std():.2f} | {seeds} | {distance_text} | {steps_text} |")
     return "\n".join(lines) + "\n"
 
 
@@ -98,7 +100,7 @@ def read_csv(path: str | os.PathLike) -> list[dict]:
         for key, value in row.items():
             if key in ("seed", "episode"):
                 row[key] = int(value)
-            elif key in ("normalized_cost", "success_rate", "success", "final_error", "path_distance"):
+            elif key in ("normalized_cost", "success_rate", "success", "final_error", "path_distance", "steps_to_goal"):
                 row[key] = float(value) if value != "" else float("nan")
     return rows
 

@@ -66,8 +66,9 @@ def test_read_csv_round_trip(tmp_path):
     back = read_csv(tmp_path / "episodes.csv")
     assert len(back) == len(rows)
     for original, read in zip(rows, back):
-        assert set(read) == set(original) | {"path_distance"}
+        assert set(read) == set(original) | {"path_distance", "steps_to_goal"}
         assert math.isnan(read["path_distance"])  # only trajectory tracking rows carry a path distance
+        assert math.isnan(read["steps_to_goal"])  # and only goal reaching rows steps to the goal
         for key, value in original.items():
             if isinstance(value, float) and math.isnan(value):
                 assert math.isnan(read[key])

@@ -111,7 +111,8 @@ def run_task(env: LatentActionEnv, policy, task: Task, *, episodes=None, transfo
         timed = _TimedPolicy(policy, bar)
         rollout = task_env.rollout(max_steps=task.num_steps, policy=timed, auto_reset=True,
                                    break_when_any_done=False, trust_policy=True)  # E x T
-    states = torch.cat([rollout["com_state"], rollout["next", "com_state"][:, -1:]], 1)
+    key = "com_state_true" if "com_state_true" in rollout.keys() else "com_state"  # costs on the true state
+    states = torch.cat([rollout[key], rollout["next", key][:, -1:]], 1)
     result = task.evaluate(states, episodes)
     paths = contacts = qpos = None
     metrics = {}
@@ -119,7 +120,7 @@ def run_task(env: LatentActionEnv, policy, task: Task, *, episodes=None, transfo
         paths = rollout["next", "com_path"].flatten(1, 2).numpy()
         contacts = rollout["next", "foot_contacts"].flatten(1, 2).numpy()
         qpos = rollout["next", "qpos"].flatten(1, 2).numpy()
-        metrics = task.extra_metrics(paths)
+        metrics = task.extra_metrics(paths, episodes.numpy())
     fell = rollout["next", "fallen"].squeeze(-1).any(1).numpy()
     actions = rollout["action"].reshape(count, task.num_steps, -1).float().numpy()
     return TaskRollout(result, actions, paths, contacts, qpos, fell, timed.seconds / task.num_steps, metrics)

@@ -117,7 +117,9 @@ class BatchedSimulator:
         nthread: simulation threads (default: the cores this process may use, :func:`available_cores`).
 
     Joint targets outside the joint range are clamped to it (:func:`hierloco.envs.locomotion.clamp_joint_targets`,
-    as MuJoCo's control range would); NaN or infinite targets are refused.
+    as MuJoCo's control range would); NaN or infinite targets are refused. With ``robot.servo_latency`` the servos
+    act on each target that many s late (whole physics steps): the first physics steps of a call run the last
+    targets of the call before (the standing pose after a reset).
     """
 
     def __init__(self, robot: str | RobotSpec, num_robots: int, *, disabled_legs: Sequence[str] = (),
@@ -147,6 +149,8 @@ class BatchedSimulator:
         self._standing = np.asarray(self.robot.standing_pose, dtype=np.float64)
         self._target_low, self._target_high = joint_target_limits(self.model)
         self.timestep = self.model.opt.timestep
+        self.latency_steps = int(round(self.robot.servo_latency / self.timestep))
+        self._in_flight = np.tile(self._standing, (self.num_robots, self.latency_steps, 1))  # sent, not yet acting
 
         data = self._datas[0]
         data.qpos[:] = standing_qpos(self.model, self.robot)
@@ -163,6 +167,8 @@ class BatchedSimulator:
         """
         index = np.arange(self.num_robots) if mask is None else np.flatnonzero(np.asarray(mask, dtype=bool))
         self.state[index] = self._standing_state
+        if self.latency_steps:
+            self._in_flight[index] = self._standing
         if self.init_joint_noise > 0 and len(index):
             noise = reset_joint_noise(self._rng, self.init_joint_noise, len(index), len(self._joint_qpos), self._locked)
             self.state[np.ix_(index, 1 + self._joint_qpos)] += noise
@@ -217,6 +223,9 @@ class BatchedSimulator:
             targets[..., self._locked] = self._standing[self._locked]
         num_steps = targets.shape[1]
         control = np.repeat(targets, PHYSICS_STEPS_PER_CONTROL, axis=1)
+        if self.latency_steps:
+            delayed = np.concatenate([self._in_flight, control], axis=1)
+            control, self._in_flight = delayed[:, :control.shape[1]], delayed[:, control.shape[1]:]
         states, sensors = self._pool.rollout(self.model, self._datas, self.state, control)
         t0 = self.state[:, 0]
         self.state = states[:, -1].copy()

@@ -5,7 +5,9 @@ For LAT the action is a latent z in the learned latent box and a step runs ``pi(
 on every robot through the batched simulator; with another low level the action is an expert index (LIB) or a
 velocity command (IK). Observations are the CoM state ``com_state`` = ``(x, y, yaw, vx, vy)`` (world frame) and
 ``com_velocity_local`` (local yaw frame) at the end of the action. A robot that falls (or whose physics blows up)
-during the action is terminated. Rewards come from a task (see :mod:`hierloco.envs.tasks`); without one they are 0.
+during the action is terminated. With a robot whose ``com_noise`` is set (a perturbed "hardware" copy,
+:mod:`hierloco.envs.robots.hardware`) both are measured with that noise, as a state estimator would, and the true
+state is ``com_state_true``. Rewards come from a task (see :mod:`hierloco.envs.tasks`); without one they are 0.
 
 Example:
     >>> from torchrl.envs.utils import check_env_specs
@@ -46,15 +48,22 @@ class LatentActionEnv(EnvBase):
         seed: seeds the reset noise.
         nthread: simulation threads.
         obstacles: static boxes in the world (a navigation arena).
+        robot: the robot simulated, when it is not the low level's own: a copy of it with other physics (the same
+            joints), e.g. :func:`hierloco.envs.robots.hardware.perturbed`.
     """
 
     def __init__(self, low_level: LowLevel, num_robots: int = 1, *, disabled_legs: Sequence[str] = (),
                  init_joint_noise: float = 0.02, record: bool = False, seed: int | None = None,
                  nthread: int | None = None, obstacles: Sequence = (), device: str = "cpu",
-                 limp_legs: Sequence[str] = ()):
+                 limp_legs: Sequence[str] = (), robot=None):
         super().__init__(batch_size=torch.Size([int(num_robots)]), device=device)
         self.low_level = low_level
-        self.robot = low_level.robot
+        self.robot = low_level.robot if robot is None else robot
+        if self.robot.joint_names != low_level.robot.joint_names:
+            raise ValueError(f"robot {self.robot.name!r} has joints {list(self.robot.joint_names)}, the low level's "
+                             f"robot {low_level.robot.name!r} {list(low_level.robot.joint_names)}")
+        self.com_noise = np.asarray(self.robot.com_noise, dtype=np.float64)
+        self._noise_rng = np.random.default_rng(seed)
         self.record = record
         self.sim = BatchedSimulator(self.robot, int(num_robots), disabled_legs=disabled_legs,
                                     init_joint_noise=init_joint_noise, seed=seed, nthread=nthread,
@@ -63,6 +72,8 @@ class LatentActionEnv(EnvBase):
         b = int(num_robots)
         observation = {"com_state": Unbounded((b, 5), device=self.device),
                        "com_velocity_local": Unbounded((b, 2), device=self.device)}
+        if self.com_noise.any():
+            observation["com_state_true"] = Unbounded((b, 5), device=self.device)
         if record:
             n, legs = self.steps_per_action, len(self.robot.legs)
             observation["com_path"] = Unbounded((b, n, 5), device=self.device)
@@ -87,8 +98,14 @@ class LatentActionEnv(EnvBase):
             velocity_local = world_to_local(state[:, 3:5], state[:, 2])
         else:
             state, velocity_local = result.com_state[:, -1], result.com_velocity_local[:, -1]
-        obs = {"com_state": torch.as_tensor(state, dtype=torch.float32, device=self.device),
-               "com_velocity_local": torch.as_tensor(velocity_local, dtype=torch.float32, device=self.device)}
+        obs = {}
+        if self.com_noise.any():
+            obs["com_state_true"] = torch.as_tensor(state, dtype=torch.float32, device=self.device)
+            std = np.repeat(self.com_noise, (2, 1, 2))  # x, y (m), yaw (rad), vx, vy (m/s)
+            state = state + std * self._noise_rng.standard_normal(state.shape)
+            velocity_local = world_to_local(state[:, 3:5], state[:, 2])
+        obs.update({"com_state": torch.as_tensor(state, dtype=torch.float32, device=self.device),
+                    "com_velocity_local": torch.as_tensor(velocity_local, dtype=torch.float32, device=self.device)})
         if self.record:
             if result is None:  # at reset: standing still, all feet down
                 n, legs = self.steps_per_action, len(self.robot.legs)
@@ -131,3 +148,4 @@ class LatentActionEnv(EnvBase):
 
     def _set_seed(self, seed: int | None) -> None:
         self.sim.seed(seed)
+        self._noise_rng = np.random.default_rng(seed)

@@ -222,9 +222,10 @@ class Task:
         ``episode`` alone when given. None for a velocity task (``0 x 2``)."""
         return np.zeros((0, 2))
 
-    def extra_metrics(self, com_paths) -> dict[str, np.ndarray]:
+    def extra_metrics(self, com_paths, episodes=None) -> dict[str, np.ndarray]:
         """Task-specific per-episode metrics (each ``E``) from ``E x S x >=2`` world-frame CoM paths (m, e.g. the
-        100 Hz paths of :class:`hierloco.components.evaluation.TaskRollout`); none by default."""
+        100 Hz paths of :class:`hierloco.components.evaluation.TaskRollout`, ``S`` = ``num_steps`` x N) of the
+        episodes ``episodes`` (``E``, default ``0 .. E-1`` modulo :attr:`num_episodes`); none by default."""
         return {}
 
     def training_split(self) -> "Task":
@@ -318,6 +319,18 @@ class GoalReaching(Task):
         goals = self.goals.numpy().astype(np.float64)
         return goals if episode is None else goals[int(episode)][None]
 
+    def extra_metrics(self, com_paths, episodes=None) -> dict[str, np.ndarray]:
+        """``steps_to_goal``: per episode, the action (1-based) during which the CoM first came within 0.2 m of the
+        goal, NaN if it never did (the paper's hardware metric, Li et al., Sec. IV-D: "all goals in 16.0 +- 1.4
+        steps"). ``com_paths``: ``E x S x >=2`` with ``S`` = ``num_steps`` x N samples."""
+        paths = np.asarray(com_paths)[..., :2]
+        episodes = np.arange(len(paths)) % self.num_episodes if episodes is None else np.asarray(episodes)
+        goals = self.goals.numpy().astype(np.float64)[episodes]
+        within = np.linalg.norm(paths - goals[:, None], axis=-1) <= SUCCESS_RADIUS
+        per_action = max(1, paths.shape[1] // self.num_steps)
+        first = np.argmax(within, axis=1)
+        return {"steps_to_goal": np.where(within.any(1), first // per_action + 1.0, np.nan)}
+
     def training_split(self) -> "GoalReaching":
         return GoalReaching(goals=self.goals[::2].numpy(), num_steps=self.num_steps, name=f"{self.name}_train")
 
@@ -391,7 +404,7 @@ class TrajectoryTracking(Task):
         """The reference points ``T x 2`` (m), one per task step, along the path (the same for every episode)."""
         return self.references.numpy().astype(np.float64)
 
-    def extra_metrics(self, com_paths) -> dict[str, np.ndarray]:
+    def extra_metrics(self, com_paths, episodes=None) -> dict[str, np.ndarray]:
         """``path_distance``: per episode, the mean distance (m) from the CoM (``E x S x >=2`` paths) to the path."""
         return {"path_distance": self.path_distance(np.asarray(com_paths)[..., :2]).mean(1)}
 

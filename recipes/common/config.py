@@ -12,7 +12,7 @@ from typing import Any, Callable, Iterable
 
 from omegaconf import DictConfig, ListConfig, OmegaConf, open_dict
 
-from hierloco.envs.faults import FAULTS as SETTINGS  # normal and the fault models
+from hierloco.envs.faults import SETTINGS, physical_setting  # normal, the fault models, the hardware robot
 CONTINUOUS_PLANNERS = ("random_shooting", "cem", "mppi")
 LIST_OPTIONS = ("settings", "eval.videos", "logger.backends")
 
@@ -132,6 +132,24 @@ def check_common(c: Checker, robot_checks: bool = True) -> Any:
             robot = with_profile(get_robot(cfg.robot), get(cfg, "robot_profile", "own"))
         except (ValueError, FileNotFoundError, OSError) as error:
             c.fail(str(error))
+    hardware = get(cfg, "hardware")
+    if hardware is not None and not isinstance(hardware, DictConfig):
+        c.fail(f"hardware must map perturbation options to values (e.g. hardware.servo_latency=0.03), got {hardware!r}")
+    elif any(s in SETTINGS and physical_setting(s) == "hardware" for s in settings):
+        from hierloco.envs.faults import setting_robot
+
+        try:
+            options = OmegaConf.to_container(hardware, resolve=True) if hardware is not None else {}
+            if robot is not None:
+                setting_robot(robot, "hardware", options)
+            else:
+                from hierloco.envs.robots import hardware_options
+
+                hardware_options(**options)
+        except (ValueError, TypeError) as error:
+            c.fail(f"hardware: {error}")
+    elif hardware is not None and len(hardware):
+        c.fail("hardware.* options are given but no setting simulates the hardware robot (settings=[...,hardware])")
     return robot
 
 

@@ -30,7 +30,8 @@ def task_evaluation(rollout, task, *, method: str, robot: str, setting: str, see
     for name, values in rollout.metrics.items():  # per episode, e.g. the mean distance to the path (m)
         for row, value in zip(rows, values):
             row[name] = float(value)
-        metrics[name] = float(np.mean(values))
+        finite = np.isfinite(values)  # steps to goal: of the goals reached
+        metrics[name] = float(np.mean(values[finite])) if finite.any() else float("nan")
     for term, values in result.cost_terms.items():  # the named terms of the cost, per step
         metrics[f"cost_{term}"] = float(np.mean(values))
     recording = {}

@@ -18,7 +18,7 @@ import numpy as np
 import torch
 from omegaconf import DictConfig, OmegaConf
 
-from hierloco.envs.faults import fault_legs
+from hierloco.envs.faults import fault_legs, is_unadapted
 from hierloco.envs.robots import get_robot
 from hierloco.io import write_text
 from hierloco.loggers import NullLogger, RunLogger, metric_component
@@ -126,6 +126,12 @@ class Run:
     def settings(self) -> list[str]:
         return list(self.cfg.settings)
 
+    @property
+    def dynamics_settings(self) -> list[str]:
+        """The settings whose CoM dynamics are learned: every setting but the ``<setting>_unadapted`` ones, which
+        plan with the normal setting's model (``normal`` is then learned first even when not evaluated)."""
+        return [name.removeprefix("dynamics_model_") for name in self.plan if name.startswith("dynamics_model_")]
+
     def stage(self, name: str, *inputs, build: Callable | None = None):
         """Stage ``name`` of the plan: loaded when finished with the same key, else built from ``inputs`` (by
         ``build(run, params, *inputs)`` when given, else by the stage's own builder)."""
@@ -155,9 +161,11 @@ class Run:
         return [other for other, stage in self.plan.items() if key in stage.after.values()]
 
     def evaluate(self, setting: str, *inputs) -> None:
-        """Every evaluation stage of ``setting`` (one per task), with the same ``inputs``."""
+        """Every evaluation stage of ``setting`` (one per task), with the same ``inputs`` (its CoM model among them),
+        and, for ``normal``, those of the ``<setting>_unadapted`` settings, which plan with the normal model."""
         for name, stage in self.plan.items():
-            if name.startswith(f"evaluation_{setting}_"):
+            evaluated = stage.params.get("setting") if name.startswith("evaluation_") else None
+            if evaluated == setting or (setting == "normal" and evaluated is not None and is_unadapted(evaluated)):
                 self.stage(name, *inputs)
 
     # ------------------------------------------------------------------------------------------------ finish

@@ -28,10 +28,10 @@ from hierloco.components.dynamics_data import TransitionData, collect_transition
 from hierloco.components.evaluation import check_gait_policy, run_task
 from hierloco.components.expert_library import ExpertLibrary, build_expert_library, require_expert_library_quality
 from hierloco.components.gait_policy import TrainedGaitPolicy, train_gait_policy
-from hierloco.envs.faults import fault_legs
+from hierloco.envs.faults import fault_legs, is_unadapted, physical_setting, setting_robot
 from hierloco.envs.latent_env import LatentActionEnv
 from hierloco.envs.locomotion import periods_per_action
-from hierloco.envs.robots import CONTROL_TIMESTEP
+from hierloco.envs.robots import CONTROL_TIMESTEP, hardware_options
 from hierloco.io import load_json, save_json
 from hierloco.results import TaskEvaluation
 from hierloco.runs import StageSpec, digest
@@ -160,11 +160,20 @@ DATA_KEYS = ("num_transitions", "num_robots", "episode_length")
 MODEL_KEYS = ("hidden", "lr", "batch_size", "holdout", "patience", "max_epochs")
 
 
+def hardware_params(cfg, setting: str) -> dict:
+    """``{"hardware": options}`` for the settings that simulate the perturbed robot (the options of
+    :func:`hierloco.envs.robots.hardware.perturbed`, ``hardware.*`` in the config over its defaults), else ``{}``."""
+    if physical_setting(setting) != "hardware":
+        return {}
+    return {"hardware": hardware_options(**(OmegaConf.to_container(cfg.hardware, resolve=True)
+                                            if cfg.get("hardware") is not None else {}))}
+
+
 def dynamics_data_stage(cfg, low_level: dict, setting: str, robot) -> Stage:
     d = section(cfg, "dynamics")
     locked, limp = fault_legs(robot, setting)
     params = {"seed": cfg.seed, "setting": setting, "disabled_legs": list(locked), "limp_legs": list(limp),
-              **{k: d[k] for k in DATA_KEYS}}
+              **{k: d[k] for k in DATA_KEYS}, **hardware_params(cfg, setting)}
     return Stage(f"dynamics_data_{setting}", params, {"low_level": low_level},
                  f"dynamics_data_{setting}.npz", TransitionData, build_dynamics_data)
 
@@ -173,7 +182,8 @@ def build_dynamics_data(run, params, make_low_level) -> TransitionData:
     """Random actions held for one action each, chained on many robots (Li et al., Sec. III-C)."""
     env = LatentActionEnv(make_low_level(params["num_robots"]), num_robots=params["num_robots"],
                           disabled_legs=params["disabled_legs"], limp_legs=params["limp_legs"], seed=params["seed"],
-                          nthread=run.nthread)
+                          nthread=run.nthread,
+                          robot=setting_robot(run.robot, params["setting"], params.get("hardware")))
     try:
         return collect_transitions(env, params["num_transitions"], episode_length=params["episode_length"],
                                    seed=params["seed"], progress=run.progress)
@@ -203,7 +213,7 @@ def build_dynamics_model(run, params, data: TransitionData, low_level) -> Traine
 def evaluation_stage(cfg, name: str, spec: dict, setting: str, model: Stage, low_level: dict) -> Stage:
     """MPC on one task; cached per task and planner (the file name carries the key's digest)."""
     params = {"seed": cfg.seed, "device": cfg.device, "setting": setting, "task_name": name, "task": spec,
-              "planner": section(cfg, "planner")}
+              "planner": section(cfg, "planner"), **hardware_params(cfg, setting)}
     after = {"model": model.digest, "low_level": low_level}
     key_digest = digest({"params": params, "after": after})
     return Stage(f"evaluation_{setting}_{name}", params, after, f"evaluation/{setting}/{name}-{key_digest}.npz",
@@ -218,7 +228,8 @@ def build_evaluation(run, params, make_low_level, model: TrainedCoMModel) -> Tas
     planner = make_planner(world_model, seed=params["seed"], **params["planner"])
     locked, limp = fault_legs(run.robot, params["setting"])
     env = LatentActionEnv(low, num_robots=task.num_episodes, disabled_legs=locked, limp_legs=limp, record=True,
-                          seed=params["seed"], nthread=run.nthread)
+                          seed=params["seed"], nthread=run.nthread,
+                          robot=setting_robot(run.robot, params["setting"], params.get("hardware")))
     try:
         rollout = run_task(env, planner, task, progress=run.progress)
     finally:
@@ -231,11 +242,19 @@ def build_evaluation(run, params, make_low_level, model: TrainedCoMModel) -> Tas
 def per_setting_stages(cfg, low_level: dict, robot) -> list[Stage]:
     """The model-based part of a plan, for every setting: dynamics data on the low level, the CoM model, one
     evaluation per task (LAT, LIB and IK share it; only their low level differs)."""
-    planned = []
-    for setting in cfg.settings:
+    planned, models = [], {}
+    learned = [s for s in cfg.settings if not is_unadapted(s)]
+    if len(learned) < len(cfg.settings) and "normal" not in learned:
+        learned.insert(0, "normal")  # an unadapted setting plans with the normal setting's model
+    for setting in learned:
         data = dynamics_data_stage(cfg, low_level, setting, robot)
-        model = dynamics_model_stage(cfg, data, setting)
-        planned += [data, model, *evaluation_stages(cfg, setting, model, low_level)]
+        models[setting] = dynamics_model_stage(cfg, data, setting)
+        planned += [data, models[setting]]
+        if setting in cfg.settings:
+            planned += evaluation_stages(cfg, setting, models[setting], low_level)
+    for setting in cfg.settings:
+        if is_unadapted(setting):
+            planned += evaluation_stages(cfg, setting, models["normal"], low_level)
     return planned
 
 

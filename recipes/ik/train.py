@@ -17,7 +17,7 @@ def main(cfg) -> float:
 
     low_level = make_low_level(run)                                 # command -> expert controller, closed loop
 
-    for setting in run.settings:
+    for setting in run.dynamics_settings:
         data = run.stage(f"dynamics_data_{setting}", low_level)     # random commands chained (Sec. III-C)
         model = run.stage(f"dynamics_model_{setting}", data, low_level(1))  # (dx, dy, dyaw, v') = f(v, command)
         run.evaluate(setting, low_level, model)                     # MPC over the command box

@@ -22,7 +22,7 @@ def main(cfg) -> float:
     low_level = make_low_level(run, trained)                        # z -> N joint targets, open loop
     run.stage("gait_policy_check", low_level(1), library)           # pi(., z_g) walks like expert g
 
-    for setting in run.settings:                                    # normal, legs_disabled
+    for setting in run.dynamics_settings:                           # normal, legs_disabled: the CoM model of each
         data = run.stage(f"dynamics_data_{setting}", low_level)     # random z held one action each (III-C)
         model = run.stage(f"dynamics_model_{setting}", data, low_level(1))  # (dx, dy, dyaw, v') = f(v, z)
         run.evaluate(setting, low_level, model)                     # MPC over z on every task (III-D)

@@ -18,7 +18,7 @@ def main(cfg) -> float:
     library = run.stage("experts")                                  # G expert gaits (Sec. III-A)
     low_level = make_low_level(library)                             # action g: replay expert g
 
-    for setting in run.settings:
+    for setting in run.dynamics_settings:
         data = run.stage(f"dynamics_data_{setting}", low_level)     # random experts chained (III-C)
         model = run.stage(f"dynamics_model_{setting}", data, low_level(1))  # over one-hot expert indices
         run.evaluate(setting, low_level, model)                     # exhaustive MPC over the G experts

@@ -415,7 +415,22 @@ def test_extra_metrics():
     points = s_path(501)
     on_path = np.concatenate([points[None], np.zeros((1, len(points), 3))], -1)
     assert task.extra_metrics(on_path)["path_distance"][0] < 2e-3
-    assert GoalReaching().extra_metrics(paths) == {} and VelocityTracking().extra_metrics(paths) == {}
+    assert VelocityTracking().extra_metrics(paths) == {}
+
+
+def test_steps_to_goal_counts_the_action_during_which_the_goal_was_first_reached():
+    task = GoalReaching(goals=[[2.0, 0.0], [0.0, 2.0]], num_steps=10)
+    n = 100  # samples per action
+    line = np.linspace(0.0, 2.0, 10 * n)  # straight at the goal, arriving at the end of the 10th action
+    towards_first = np.stack([line, np.zeros_like(line)], -1)
+    # within 0.2 m from sample 900 (1.8 m): during the 10th action
+    paths = np.stack([towards_first, np.zeros_like(towards_first)])  # the second robot stands still
+    steps = task.extra_metrics(paths)["steps_to_goal"]
+    assert steps[0] == 10 and np.isnan(steps[1])
+    fast = np.stack([np.minimum(2 * line, 2.0), np.zeros_like(line)], -1)  # 1.8 m after 450 samples
+    assert task.extra_metrics(fast[None])["steps_to_goal"][0] == 5
+    # the episode decides the goal: robot 0 running episode 1 walks away from its goal
+    assert np.isnan(task.extra_metrics(towards_first[None], episodes=[1])["steps_to_goal"][0])
 
 
 def test_training_split_goals_every_other_on_both_axes():

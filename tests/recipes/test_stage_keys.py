@@ -122,3 +122,26 @@ def test_the_robot_s_fingerprint_is_in_every_key():
     softer = a1.replace(kp=tuple(0.5 * k for k in (a1.kp or [100.0] * a1.num_joints)))
     assert softer.name == "a1" and robot_fingerprint(softer) != robot_fingerprint(a1)
     assert robot_fingerprint(a1.replace(gait_period=0.25)) != robot_fingerprint(a1)
+
+
+def test_the_hardware_settings_keys():
+    """``hardware`` re-learns the CoM model on the perturbed robot, with its options in the key; ``hardware_unadapted``
+    evaluates the perturbed robot with the normal setting's model, which it learns even when normal is not asked."""
+    cfg = config("lat")
+    with open_dict(cfg):
+        cfg.settings = ["hardware_unadapted", "hardware"]
+    utils = importlib.import_module("recipes.lat.utils")
+    plan = {stage.name: stage for stage in utils.plan(cfg, prepare(cfg, utils.checks))}
+    assert "dynamics_model_normal" in plan and "evaluation_normal_goal_reaching" not in plan
+    assert not any(name.startswith("dynamics_data_hardware_unadapted") for name in plan)
+    unadapted = plan["evaluation_hardware_unadapted_goal_reaching"]
+    assert unadapted.after["model"] == plan["dynamics_model_normal"].digest
+    assert plan["evaluation_hardware_goal_reaching"].after["model"] == plan["dynamics_model_hardware"].digest
+    assert plan["dynamics_data_hardware"].params["hardware"]["servo_latency"] == 0.02
+    assert "hardware" not in plan["dynamics_data_normal"].params  # nominal keys are as they were
+    with open_dict(cfg):
+        cfg.hardware = {"servo_latency": 0.04}
+    later = {stage.name: stage for stage in utils.plan(cfg, prepare(cfg, utils.checks))}
+    changed = {name for name, stage in later.items() if stage.digest != plan[name].digest}
+    assert changed == {"dynamics_data_hardware", "dynamics_model_hardware"} | {
+        name for name in plan if name.startswith("evaluation_hardware")}

@@ -27,6 +27,7 @@ MISTAKES = [
     ("eval.videos=[dance]", "eval.videos names 'dance'"),
     ("foo=1", "Could not override 'foo'"),
     ("planner=fancy", "fancy"),
+    ("+hardware.servo_latency=0.03", "no setting simulates the hardware robot"),
 ]
 
 
@@ -49,6 +50,18 @@ def run_in_process(recipe: str, *overrides: str) -> tuple[int, str]:
         sys.argv, sys.path[:] = saved_argv, saved_path
         sys.modules.pop("utils", None)
     return code, err.getvalue()
+
+
+@pytest.mark.parametrize("overrides, message", [
+    (["+hardware.latency=0.03"], "hardware: unknown hardware option(s) ['latency']"),
+    (["+hardware.mass_scale=-1"], "hardware: robot 'a1_hardware': mass_scale must be a finite positive number"),
+])
+def test_a_bad_hardware_option_is_one_clear_line(tmp_path, monkeypatch, overrides, message):
+    monkeypatch.chdir(tmp_path)
+    code, stderr = run_in_process("lat", "preset=tiny", f"run_dir={tmp_path / 'run'}", "settings=[normal,hardware]",
+                                  *overrides)
+    assert code == 2 and stderr.startswith("error: ") and message in stderr, stderr
+    assert len(stderr.strip().splitlines()) == 1 and not (tmp_path / "run").exists()
 
 
 @pytest.mark.parametrize("override, message", MISTAKES)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from hierloco.envs.robots.a1 import A1
 from hierloco.envs.robots.daisy import DAISY
+from hierloco.envs.robots.hardware import HARDWARE, hardware_options, perturbed
 from hierloco.envs.robots.mjcf import robot_from_mjcf
 from hierloco.envs.robots.registry import (
     ENTRY_POINT_GROUP,
@@ -47,5 +48,5 @@ __all__ = [
     "Obstacle", "RobotSpec", "admissible_gait_periods", "available_robots", "compile_model", "derive_gait_period",
     "derive_standing_height", "foot_geoms", "get_robot", "joint_qpos_indices", "joint_qvel_indices",
     "load_robot_yaml", "register_robot", "robot_fingerprint", "robot_from_mjcf", "robot_reference",
-    "standing_qpos",
+    "standing_qpos", "HARDWARE", "hardware_options", "perturbed",
 ]

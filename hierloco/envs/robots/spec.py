@@ -136,6 +136,12 @@ class RobotSpec:
             (and for the actuators hierloco builds itself).
         torque_limit: actuator torque limit per joint in N m (``None`` keeps the model's own).
         joint_damping: damping per joint in N m s / rad (``None`` keeps the model's own).
+        foot_friction: sliding friction of the feet's contacts (``None`` keeps the model's own).
+        mass_scale: every body's mass and inertia times this (a payload, heavier parts than modelled).
+        servo_latency: the servos act on each joint target this many s after it was sent (a multiple of the 2 ms
+            physics step; the batched simulator, :class:`hierloco.envs.batched_sim.BatchedSimulator`).
+        com_noise: standard deviations of the measured CoM state: position (m), yaw (rad), velocity (m/s), as a
+            state estimator's noise (the latent-action env's observations, :mod:`hierloco.envs.latent_env`).
         description: a line for reports.
         source: where the description came from, for reports: ``"builtin"``, ``"python"``,
             ``"yaml:<path>"``, ``"entry_point:<name> = <module:object>"`` (see :attr:`reference`).
@@ -167,6 +173,9 @@ class RobotSpec:
     torque_limit: tuple[float, ...] | None = None
     joint_damping: tuple[float, ...] | None = None
     foot_friction: float | None = None
+    mass_scale: float = 1.0
+    servo_latency: float = 0.0
+    com_noise: tuple[float, float, float] = (0.0, 0.0, 0.0)
     description: str = field(default="", compare=False)
     source: str = field(default=PYTHON_SOURCE, compare=False)
 
@@ -209,6 +218,14 @@ class RobotSpec:
                 raise ValueError(f"{where}: {name} must be a finite positive number, got {value!r}")
         if self.foot_friction is not None and not (_finite(self.foot_friction) and self.foot_friction > 0):
             raise ValueError(f"{where}: foot_friction must be a finite positive number, got {self.foot_friction!r}")
+        if not (_finite(self.mass_scale) and self.mass_scale > 0):
+            raise ValueError(f"{where}: mass_scale must be a finite positive number, got {self.mass_scale!r}")
+        if not (_finite(self.servo_latency) and 0 <= self.servo_latency <= 0.5):
+            raise ValueError(f"{where}: servo_latency must be a number of s in [0, 0.5], got {self.servo_latency!r}")
+        if len(tuple(self.com_noise)) != 3 or not all(_finite(v) and v >= 0 for v in self.com_noise):
+            raise ValueError(f"{where}: com_noise must be 3 numbers >= 0 (position m, yaw rad, velocity m/s), "
+                             f"got {self.com_noise!r}")
+        object.__setattr__(self, "com_noise", tuple(float(v) for v in self.com_noise))
         if self.min_height is not None and not (_finite(self.min_height) and self.min_height >= 0):
             raise ValueError(f"{where}: min_height must be a finite number >= 0, got {self.min_height!r}")
         # derive what was not given (one compiled model for both)
@@ -364,6 +381,9 @@ def compile_model(robot: RobotSpec, disabled_legs: Sequence[str] = (),
         feet = foot_geoms(model, robot)
         model.geom_friction[feet, 0] = robot.foot_friction
         model.geom_priority[feet] = 1  # the foot's friction is the contact's, whatever it stands on
+    if robot.mass_scale != 1.0:
+        model.body_mass[1:] *= robot.mass_scale  # body 0 is the world
+        model.body_inertia[1:] *= robot.mass_scale
     if len(limp):
         model.actuator_gainprm[limp, 0] = 0.0  # actuators are in joint order: no stiffness, no damping, no torque
         model.actuator_biasprm[limp, :3] = 0.0
@@ -628,6 +648,9 @@ def derive_gait_period(robot: RobotSpec, steps_per_action: int = STEPS_PER_ACTIO
 # ---------------------------------------------------------------------------------------------------- fingerprint
 FINGERPRINT_VERSION = b"hierloco robot fingerprint 1"
 _NOT_FINGERPRINTED = ("build_spec", "source")
+# fields added after fingerprint 1: fingerprinted only when they differ from their default, so that every robot
+# described before keeps its fingerprint (and its cached runs)
+_FINGERPRINTED_WHEN_SET = {"mass_scale": 1.0, "servo_latency": 0.0, "com_noise": (0.0, 0.0, 0.0)}
 
 
 def robot_fingerprint(robot: RobotSpec) -> str:
@@ -647,7 +670,8 @@ def robot_fingerprint(robot: RobotSpec) -> str:
     model = compile_model(robot)
     mjb = np.empty(mujoco.mj_sizeModel(model), dtype=np.uint8)
     mujoco.mj_saveModel(model, None, mjb)
-    fields = {f.name: getattr(robot, f.name) for f in dataclasses.fields(robot) if f.name not in _NOT_FINGERPRINTED}
+    fields = {f.name: getattr(robot, f.name) for f in dataclasses.fields(robot) if f.name not in _NOT_FINGERPRINTED
+              and not (f.name in _FINGERPRINTED_WHEN_SET and getattr(robot, f.name) == _FINGERPRINTED_WHEN_SET[f.name])}
     fields["legs"] = [dataclasses.asdict(leg) for leg in robot.legs]
     text = json.dumps(fields, sort_keys=True, default=float).encode()
     digest = hashlib.sha256(FINGERPRINT_VERSION + b"\0" + text + b"\0" + mjb.tobytes()).hexdigest()

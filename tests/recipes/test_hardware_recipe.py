@@ -1,0 +1,39 @@
+"""The transfer study on tiny settings: LAT's low level from the nominal robot, evaluated on the nominal robot, on
+the perturbed copy with the nominal CoM model, and on the copy with the model learned again on it."""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from hierloco.components.dynamics_data import TransitionData
+from hierloco.results import read_csv
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_hardware_tiny(tmp_path):
+    out = tmp_path / "out"
+    command = [sys.executable, str(ROOT / "recipes" / "hardware" / "run.py"), "preset=tiny", "robots=[a1]",
+               "seeds=[0]", "methods=[lat]", "num_transitions=50", "+hardware.servo_latency=0.04", f"out_dir={out}",
+               'overrides=["eval.generalization=null","eval.figures=false","eval.videos=[]"]']
+    result = subprocess.run(command, cwd=tmp_path, env={**os.environ, "WANDB_MODE": "offline"}, capture_output=True,
+                            text=True, timeout=900)
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    rows = read_csv(out / "hardware.csv")
+    assert {r["setting"] for r in rows} == {"normal", "hardware_unadapted", "hardware"}
+    summary = (out / "hardware.md").read_text()
+    assert "| a1 | lat | perturbed, model re-learned |" in summary and "servo_latency 0.04" in summary
+    run = tmp_path / "outputs" / "hardware" / "tiny" / "lat" / "a1_seed0"
+    assert not list(run.glob("dynamics_*_hardware_unadapted*")), "the unadapted setting learns nothing"
+    normal, hardware = (TransitionData.load(run / f"dynamics_data_{s}.npz") for s in ("normal", "hardware"))
+    assert len(hardware) == 50 and not np.allclose(normal.next_com_state, hardware.next_com_state)
+    key = json.loads(next((run / "evaluation" / "hardware_unadapted").glob("goal_reaching-*.key.json")).read_text())
+    normal_model = json.loads((run / "dynamics_model_normal.pt.key.json").read_text())
+    from hierloco.runs import digest
+
+    assert key["after"]["model"] == digest(normal_model), "planned with the nominal robot's CoM model"
+    assert key["params"]["hardware"]["servo_latency"] == 0.04
