@@ -114,7 +114,7 @@ def paper_check_markdown(checks: list[Check], *, title: str) -> str:
     lines = [f"# The paper's claims, checked\n\n{title}. Normalised cost, mean +- std over seeds (each seed's mean "
              f"over its targets); a fallen robot's cost counts as 1. \"Close\" means LAT's mean at most {CLOSE} "
              f"above IK's; \"better\", \"worse\" and \"best\" mean by more than {TIE}.\n",
-             "| claim | robot | setting | task | ours | paper (A1) | verdict |",
+             "| claim | robot | setting | task | ours | paper (numbers it states; A1 only) | verdict |",
              "|---|---|---|---|---|---|---|"]
     lines += [f"| {c.claim} | {c.robot} | {c.setting} | {c.task} | {c.ours} | {c.paper} | {c.verdict} |"
               for c in checks]
