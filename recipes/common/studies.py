@@ -103,7 +103,9 @@ def execute(job: Job, fetch_run_dir: bool = False) -> dict:
            "WANDB_SILENT": "true"}
     log = Path(job.run_dir).parent / f"{Path(job.run_dir).name}.log"
     log.parent.mkdir(parents=True, exist_ok=True)
-    with open(log, "w") as out:
+    with open(log, "a") as out:  # appended: a re-run (reusing stages) keeps the log of the run that built them
+        out.write(f"=== {time.strftime('%Y-%m-%d %H:%M:%S UTC', time.gmtime())}: {' '.join(job.command())}\n")
+        out.flush()
         code = subprocess.run(job.command(), stdout=out, stderr=subprocess.STDOUT, env=env, cwd=os.getcwd()).returncode
     outcome = {"ok": code == 0, "seconds": time.perf_counter() - start, "rows": [], "error": "", "archive": None}
     if code != 0:
