@@ -85,19 +85,25 @@ class Checker:
 
 # ---------------------------------------------------------------------------------------------------- tasks
 def make_task_from_spec(name: str, spec: dict):
-    """The task ``name`` of the ``eval`` section: ``spec`` holds its type (``task``, default the name) and options.
+    """The task ``name`` of the ``eval`` section: ``spec`` holds its type (``task``, default the name) and options;
+    ``split: train`` gives its training split instead (:meth:`hierloco.envs.tasks.Task.training_split`: the half of
+    the targets a baseline is trained or tuned on), named ``<name>_train``.
 
     Unknown options and bad values raise :class:`ConfigError` naming the task, the option and the valid ones."""
     from hierloco.envs.tasks import TASKS, make_task
 
     options = dict(spec or {})
     kind = options.pop("task", name)
+    split = options.pop("split", "all")
     if kind not in TASKS:
         raise ConfigError(f"bad config: unknown task {kind!r} for eval task {name!r} (tasks: {', '.join(TASKS)})")
+    if split not in ("all", "train"):
+        raise ConfigError(f"bad config: eval task {name!r}: split must be all or train, got {split!r}")
     try:
-        return make_task(kind, **{"name": name, **options})
+        task = make_task(kind, **{"name": name, **options})
     except (TypeError, ValueError) as error:
         raise ConfigError(f"bad config: eval task {name!r}: {error}") from None
+    return task.training_split() if split == "train" else task
 
 
 # ---------------------------------------------------------------------------------------------------- recipes

@@ -28,6 +28,7 @@ MISTAKES = [
     ("foo=1", "Could not override 'foo'"),
     ("planner=fancy", "fancy"),
     ("+hardware.servo_latency=0.03", "no setting simulates the hardware robot"),
+    ("+eval.tasks.goal_reaching.split=half", "split must be all or train, got 'half'"),
 ]
 
 

@@ -1,0 +1,123 @@
+"""Tune a baseline on its training targets (Li et al., RA-L 2021, Sec. IV-B: baselines see half of each task's
+targets), as jobs on Ray, so that the comparison runs each baseline at its best without looking at its test targets.
+
+    python recipes/tune/run.py                              # IK: integral vs the paper's plain footstep law
+    python recipes/tune/run.py robots=[daisy] seeds=[0] 'candidates={a: {overrides: []}, b: {overrides: [...]}}'
+
+Every candidate runs the method's recipe in the normal setting with every task replaced by its training split
+(``eval.tasks.<task>.split=train``), in ``out_dir/<candidate>/<robot>_seed<seed>``; a candidate with ``reuse``
+starts from the finished stages ``reuse_stages`` of ``outputs/<reuse>/<preset>/<robot>_seed<seed>`` (their keys are
+checked like any cached stage). Writes ``tune.csv``, ``tune.md`` (per robot and candidate: the training-split cost
+of every task and their mean, the best candidate marked) and ``wallclock.md`` in ``out_dir``.
+"""
+
+import hierloco  # noqa: F401  (first: headless MuJoCo rendering is set before anything loads MuJoCo)
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from hierloco.io import write_text
+from hierloco.results import EPISODE_COLUMNS, csv_text
+from recipes.common import studies
+from recipes.common.config import ConfigError, as_lists
+from recipes.common.entry import recipe_main
+
+
+def check(cfg) -> list:
+    """The robots; raises one ConfigError naming every problem."""
+    from hierloco.envs.robots import get_robot
+
+    as_lists(cfg, ("robots", "seeds", "tasks", "overrides", "reuse_stages"))
+    problems, robots = [], []
+    if not (Path(__file__).resolve().parents[1] / cfg.method / "train.py").exists():
+        problems.append(f"unknown method {cfg.method!r}: no recipes/{cfg.method}/train.py")
+    if not cfg.candidates:
+        problems.append("candidates is empty")
+    for name, candidate in (cfg.candidates or {}).items():
+        unknown = set(candidate) - {"overrides", "reuse"}
+        if unknown:
+            problems.append(f"candidate {name!r}: unknown keys {sorted(unknown)} (overrides, reuse)")
+    for robot in cfg.robots:
+        try:
+            robots.append(get_robot(robot))
+        except (ValueError, OSError) as error:
+            problems.append(str(error))
+    problems += [f"seed {s!r} is not an integer >= 0" for s in cfg.seeds if not (isinstance(s, int) and s >= 0)]
+    if not cfg.tasks:
+        problems.append("tasks is empty")
+    if problems:
+        raise ConfigError("bad config: " + "; ".join(problems))
+    return robots
+
+
+def jobs(cfg, robots) -> list:
+    planned = []
+    split = [f"+eval.tasks.{task}.split=train" for task in cfg.tasks]
+    only = [f"~eval.tasks.{task}" for task in ("velocity_tracking", "goal_reaching", "trajectory_tracking")
+            if task not in cfg.tasks]
+    for spec in robots:
+        for name, candidate in cfg.candidates.items():
+            for seed in cfg.seeds:
+                run_dir = Path(cfg.out_dir) / name / f"{spec.name}_seed{seed}"
+                reuse = candidate.get("reuse")
+                source = str(Path("outputs") / reuse / cfg.preset_name / f"{spec.name}_seed{seed}") if reuse else None
+                overrides = [f"preset={cfg.preset_name}", f"robot={spec.reference}", f"seed={seed}",
+                             "settings=[normal]", "progress=false", *only, *split, *cfg.overrides,
+                             *candidate.get("overrides", [])]
+                planned.append(studies.Job(cfg.method, str(run_dir), overrides, labels={"candidate": name},
+                                           reuse_from=source, reuse_stages=tuple(cfg.reuse_stages)))
+    return planned
+
+
+def tune_table(rows: list[dict], tasks) -> tuple[str, dict]:
+    """Per robot and candidate, the mean normalised cost on each task's training split (mean over seeds of each
+    seed's mean over targets) and their mean; returns the Markdown table and the best candidate per robot."""
+    header = " | ".join(f"{t} (train)" for t in tasks)
+    lines = [f"| robot | candidate | {header} | mean | best |", "|---|---|" + "---|" * len(tasks) + "---|---|"]
+    best = {}
+    for robot in sorted({r["robot"] for r in rows}):
+        scores = {}
+        for candidate in dict.fromkeys(r["candidate"] for r in rows):
+            costs = []
+            for task in tasks:
+                of = [r for r in rows if (r["robot"], r["candidate"], r["task"]) == (robot, candidate, f"{task}_train")]
+                seeds = sorted({r["seed"] for r in of})
+                per_seed = [np.mean([1.0 if np.isnan(r["normalized_cost"]) else r["normalized_cost"]
+                                     for r in of if r["seed"] == s]) for s in seeds]
+                costs.append((float(np.mean(per_seed)), float(np.std(per_seed))) if per_seed else (np.nan, np.nan))
+            scores[candidate] = (float(np.mean([c[0] for c in costs])), costs)
+        best[robot] = min(scores, key=lambda c: scores[c][0])
+        for candidate, (mean, costs) in scores.items():
+            cells = " | ".join(f"{m:.2f} +- {s:.2f}" for m, s in costs)
+            lines.append(f"| {robot} | {candidate} | {cells} | {mean:.3f} | {'best' if candidate == best[robot] else ''} |")
+    return "\n".join(lines) + "\n", best
+
+
+@recipe_main(__file__)
+def main(cfg) -> None:
+    from recipes.common.report import wallclock_markdown
+
+    robots = check(cfg)
+    results = studies.run_jobs(jobs(cfg, robots), address=cfg.ray.address, cores_per_job=cfg.ray.cores_per_job,
+                               fetch_run_dirs=cfg.ray.fetch_run_dirs)
+    rows = studies.rows_of(results)
+    out = Path(cfg.out_dir)
+    if rows:
+        table, best = tune_table(rows, list(cfg.tasks))
+        write_text(out / "tune.csv", csv_text(rows, EPISODE_COLUMNS + ["candidate"]))
+        chosen = "; ".join(f"{robot}: {name}" for robot, name in best.items())
+        write_text(out / "tune.md", f"# Tuning {cfg.method.upper()} on the training targets ({cfg.preset_name} "
+                                    f"preset, seeds {list(cfg.seeds)})\n\nNormalised cost on each task's training "
+                                    f"split, mean +- std over seeds; the best candidate has the lowest mean.\n\n"
+                                    f"{table}\nBest: {chosen}.\n")
+        write_text(out / "wallclock.md", wallclock_markdown(results))
+        print("\n" + table + f"\nbest: {chosen}")
+    print(f"tuning table in {out}/")
+    if studies.report_failures(results):
+        sys.exit(1)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,37 @@
+"""Tuning a baseline on its training targets (tiny settings): every candidate evaluated on the training splits only,
+starting from a finished run's stages when asked, and the best candidate per robot named."""
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+from hierloco.results import read_csv
+
+ROOT = Path(__file__).resolve().parents[2]
+SMALL = ["eval.generalization=null", "eval.videos=[]", "eval.figures=false", "progress=false"]
+
+
+def test_tune_ik_tiny(tmp_path):
+    env = {**os.environ, "WANDB_MODE": "offline"}
+    source = tmp_path / "outputs" / "ik" / "tiny" / "a1_seed0"  # a finished IK run the integral candidate reuses
+    done = subprocess.run([sys.executable, str(ROOT / "recipes" / "ik" / "train.py"), "preset=tiny", "seed=0",
+                           f"run_dir={source}", *SMALL], cwd=tmp_path, env=env, capture_output=True, text=True,
+                          timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    out = tmp_path / "out"
+    result = subprocess.run([sys.executable, str(ROOT / "recipes" / "tune" / "run.py"), "preset=tiny", "robots=[a1]",
+                             "seeds=[0]", f"out_dir={out}"], cwd=tmp_path, env=env, capture_output=True, text=True,
+                            timeout=900)
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    rows = read_csv(out / "tune.csv")
+    assert {r["task"] for r in rows} == {"velocity_tracking_train", "goal_reaching_train", "trajectory_tracking_train"}
+    test_goals = len([r for r in read_csv(source / "episodes.csv") if r["task"] == "goal_reaching"])
+    train_goals = [r for r in rows if r["task"] == "goal_reaching_train" and r["candidate"] == "plain"]
+    assert len(train_goals) == (test_goals + 1) // 2, "every other goal"
+    reused = out / "integral" / "a1_seed0" / "dynamics_data_normal.npz"
+    assert reused.read_bytes() == (source / "dynamics_data_normal.npz").read_bytes()
+    table = (out / "tune.md").read_text()
+    lines = [line for line in table.splitlines() if line.startswith("| a1 |")]
+    assert len(lines) == 2 and sum(line.endswith("| best |") for line in lines) == 1, table
+    assert "Best: a1: " in table
