@@ -1,7 +1,7 @@
 """Compare methods (Li et al., RA-L 2021, Sec. IV-B and IV-C): every method's recipe on every robot and seed, as
 jobs on Ray, then the comparison table and bar charts.
 
-    python recipes/compare/run.py                           # LAT, LIB, IK, SAC on A1 and Daisy, paper scale
+    python recipes/compare/run.py                           # LAT, LIB, IK, IK-plain, SAC, SAC-SAC on A1 and Daisy
     python recipes/compare/run.py robots=[a1] seeds=[0,1,2] preset=small ray.cores_per_job=2
     RAY_ADDRESS=ray://head:10001 python recipes/compare/run.py seeds=[0,1,2]
 
