@@ -16,6 +16,8 @@ import hierloco  # noqa: F401  (first: headless MuJoCo rendering is set before a
 import sys
 from pathlib import Path
 
+from omegaconf import OmegaConf
+
 from hierloco.io import write_text
 from recipes.common import studies
 from recipes.common.config import ConfigError, as_lists
@@ -83,7 +85,7 @@ def main(cfg) -> None:
     if rows:
         table = write_study_tables(rows, results, Path(cfg.out_dir), name="comparison", settings=cfg.settings,
                                    title=f"Normalised cost ({cfg.preset_name} preset, {len(cfg.seeds)} seed(s))")
-        checks = paper_check.check_claims(rows)
+        checks = paper_check.check_claims(rows, tuned_ik=OmegaConf.to_container(cfg.tuned_ik) if cfg.tuned_ik else None)
         write_text(Path(cfg.out_dir) / "paper_check.md", paper_check.paper_check_markdown(
             checks, title=f"{cfg.preset_name} preset, seeds {list(cfg.seeds)}"))
         print("\n" + table)

@@ -41,3 +41,14 @@ def test_a_difference_within_the_tie_margin_is_no_win():
     got = verdicts(check_claims(data))
     assert got[("LAT beats IK with legs disabled", "legs_disabled", "velocity_tracking")].startswith(
         "does not hold (a tie")
+
+
+def test_the_tuned_ik_is_named_in_its_claims():
+    rows = [{"method": m, "robot": "daisy", "setting": s, "task": "velocity_tracking", "seed": 0, "normalized_cost": c}
+            for m, s, c in (("lat", "normal", 0.16), ("ik", "normal", 0.37), ("ik_plain", "normal", 0.10),
+                            ("lat", "legs_disabled", 0.68), ("ik", "legs_disabled", 0.57),
+                            ("ik_plain", "legs_disabled", 0.93))]
+    checks = {c.claim: c.verdict for c in check_claims(rows, tuned_ik={"daisy": "ik_plain"})}
+    assert checks["LAT beats IK_PLAIN (the IK tuned on the training targets) with legs disabled"] == "holds"
+    assert checks["LAT beats IK with legs disabled"] == "does not hold"
+    assert "LAT is close to IK_PLAIN (the IK tuned on the training targets) (at most 0.1 above)" in checks
