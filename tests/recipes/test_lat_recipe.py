@@ -111,7 +111,8 @@ def artifact_bytes(run_dir: Path) -> dict:
     """Every training artifact and its key, by relative path."""
     return {str(p.relative_to(run_dir)): p.read_bytes() for p in sorted(run_dir.rglob("*"))
             if p.is_file() and p.suffix in (".npz", ".pt", ".json") and "evaluation" not in str(p.relative_to(run_dir))
-            and p.name != "report.json" and not str(p.relative_to(run_dir)).startswith("logs")}
+            and p.name not in ("report.json", "builds.json")  # records of this invocation and of build times
+            and not str(p.relative_to(run_dir)).startswith("logs")}
 
 
 def test_evaluate_adds_a_task_without_touching_training(tiny_run, tmp_path):
@@ -120,6 +121,7 @@ def test_evaluate_adds_a_task_without_touching_training(tiny_run, tmp_path):
     copy = tmp_path / "run"
     shutil.copytree(tiny_run[0], copy)
     before = artifact_bytes(copy)
+    builds = json.loads((copy / "builds.json").read_text())
     results = (copy / "results.csv").read_bytes()
     result = subprocess.run([sys.executable, str(ROOT / "recipes" / "lat" / "evaluate.py"), f"run_dir={copy}",
                              "name=far", "progress=false", "eval.videos=[]",
@@ -127,6 +129,9 @@ def test_evaluate_adds_a_task_without_touching_training(tiny_run, tmp_path):
                              "num_steps: 3}"], cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert result.returncode == 0, result.stderr[-3000:]
     assert artifact_bytes(copy) == before and (copy / "results.csv").read_bytes() == results
+    after = json.loads((copy / "builds.json").read_text())  # the new evaluation's build time is added, no other
+    assert {k: v for k, v in after.items() if k in builds} == builds and set(after) - set(builds) == {
+        f"evaluation_{setting}_goal_reaching_5m" for setting in ("normal", "legs_disabled")}
     rows = list(csv.DictReader(open(copy / "evaluations" / "far" / "results.csv")))
     assert {r["task"] for r in rows} >= {"goal_reaching_5m", "goal_reaching"}
     new = [p for p in (copy / "evaluation" / "normal").iterdir() if p.name.startswith("goal_reaching_5m-")]
