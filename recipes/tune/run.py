@@ -23,6 +23,7 @@ from hierloco.results import EPISODE_COLUMNS, csv_text
 from recipes.common import studies
 from recipes.common.config import ConfigError, as_lists
 from recipes.common.entry import recipe_main
+from recipes.compare.paper_check import seed_means
 
 
 def check(cfg) -> list:
@@ -73,7 +74,7 @@ def jobs(cfg, robots) -> list:
 
 def tune_table(rows: list[dict], tasks) -> tuple[str, dict]:
     """Per robot and candidate, the mean normalised cost on each task's training split (mean over seeds of each
-    seed's mean over targets) and their mean; returns the Markdown table and the best candidate per robot."""
+    seed's mean over targets, :func:`recipes.compare.paper_check.seed_means`) and their mean; returns the Markdown table and the best candidate per robot."""
     header = " | ".join(f"{t} (train)" for t in tasks)
     lines = [f"| robot | candidate | {header} | mean | best |", "|---|---|" + "---|" * len(tasks) + "---|---|"]
     best = {}
@@ -81,12 +82,10 @@ def tune_table(rows: list[dict], tasks) -> tuple[str, dict]:
         scores = {}
         for candidate in dict.fromkeys(r["candidate"] for r in rows):
             costs = []
+            of = [{**r, "method": r["candidate"]} for r in rows if r["candidate"] == candidate]
             for task in tasks:
-                of = [r for r in rows if (r["robot"], r["candidate"], r["task"]) == (robot, candidate, f"{task}_train")]
-                seeds = sorted({r["seed"] for r in of})
-                per_seed = [np.mean([1.0 if np.isnan(r["normalized_cost"]) else r["normalized_cost"]
-                                     for r in of if r["seed"] == s]) for s in seeds]
-                costs.append((float(np.mean(per_seed)), float(np.std(per_seed))) if per_seed else (np.nan, np.nan))
+                per_seed = seed_means(of, method=candidate, robot=robot, setting="normal", task=f"{task}_train")
+                costs.append((float(per_seed.mean()), float(per_seed.std())) if per_seed.size else (np.nan, np.nan))
             scores[candidate] = (float(np.mean([c[0] for c in costs])), costs)
         best[robot] = min(scores, key=lambda c: scores[c][0])
         for candidate, (mean, costs) in scores.items():
