@@ -3,6 +3,7 @@ jobs on Ray, then the comparison table and bar charts.
 
     python recipes/compare/run.py                           # LAT, LIB, IK, IK-plain, SAC, SAC-SAC on A1 and Daisy
     python recipes/compare/run.py robots=[a1] seeds=[0,1,2] preset=small ray.cores_per_job=2
+    python recipes/compare/run.py seeds=[0,1,2] +method_seeds.sac=[0] +method_seeds.sac_sac=[0]   # fewer seeds for some
     RAY_ADDRESS=ray://head:10001 python recipes/compare/run.py seeds=[0,1,2]
 
 Each method runs as its own recipe in its own run directory (``outputs/<method>/<preset>/<robot>_seed<seed>``), so
@@ -48,6 +49,14 @@ def check(cfg) -> list:
     problems += [f"seed {s!r} is not an integer >= 0" for s in cfg.seeds if not (isinstance(s, int) and s >= 0)]
     if not cfg.seeds:
         problems.append("seeds is empty")
+    for method, seeds in cfg.method_seeds.items():
+        if method not in cfg.methods:
+            problems.append(f"method_seeds names {method!r}, which is not in methods {list(cfg.methods)}")
+        elif not OmegaConf.is_list(seeds) or not seeds:
+            problems.append(f"method_seeds.{method} must be a non-empty list of seeds, got {seeds!r}")
+        else:
+            problems += [f"method_seeds.{method}: seed {s!r} is not an integer >= 0" for s in seeds
+                         if not (isinstance(s, int) and s >= 0)]
     if not (isinstance(cfg.ray.cores_per_job, int) and cfg.ray.cores_per_job >= 1):
         problems.append(f"ray.cores_per_job must be an integer >= 1, got {cfg.ray.cores_per_job!r}")
     if not isinstance(cfg.generalization, bool):
@@ -55,6 +64,17 @@ def check(cfg) -> list:
     if problems:
         raise ConfigError("bad config: " + "; ".join(problems))
     return robots
+
+
+def seeds_of(cfg, method: str) -> list[int]:
+    """The seeds ``method`` runs with: ``method_seeds.<method>`` if given, else ``seeds``."""
+    return list(cfg.method_seeds.get(method, cfg.seeds))
+
+
+def seeds_text(cfg) -> str:
+    """The seeds of the study, in words: ``seeds [0, 1, 2]`` or ``seeds [0, 1, 2] (sac: [0])``."""
+    others = ", ".join(f"{m}: {seeds_of(cfg, m)}" for m in cfg.methods if m in cfg.method_seeds)
+    return f"seeds {list(cfg.seeds)}" + (f" ({others})" if others else "")
 
 
 def jobs(cfg, robots) -> list:
@@ -66,7 +86,7 @@ def jobs(cfg, robots) -> list:
             if not settings:
                 continue
             recipe, variant = studies.resolve_method(method, cfg.variants)
-            for seed in cfg.seeds:
+            for seed in seeds_of(cfg, method):
                 run_dir = Path("outputs") / method / cfg.preset_name / f"{spec.name}_seed{seed}"
                 overrides = [f"preset={cfg.preset_name}", f"robot={spec.reference}", f"seed={seed}",
                              f"settings=[{','.join(settings)}]", "progress=false", *generalization, *variant,
@@ -84,10 +104,10 @@ def main(cfg) -> None:
     rows = studies.rows_of(results)
     if rows:
         table = write_study_tables(rows, results, Path(cfg.out_dir), name="comparison", settings=cfg.settings,
-                                   title=f"Normalised cost ({cfg.preset_name} preset, {len(cfg.seeds)} seed(s))")
+                                   title=f"Normalised cost ({cfg.preset_name} preset, {seeds_text(cfg)})")
         checks = paper_check.check_claims(rows, tuned_ik=OmegaConf.to_container(cfg.tuned_ik) if cfg.tuned_ik else None)
         write_text(Path(cfg.out_dir) / "paper_check.md", paper_check.paper_check_markdown(
-            checks, title=f"{cfg.preset_name} preset, seeds {list(cfg.seeds)}"))
+            checks, title=f"{cfg.preset_name} preset, {seeds_text(cfg)}"))
         print("\n" + table)
         print(f"comparison table, figures and the paper's claims checked (paper_check.md) in {cfg.out_dir}/")
     if studies.report_failures(results):

@@ -80,3 +80,35 @@ def test_compare_refuses_unknown_method(tmp_path):
     result = subprocess.run(command, cwd=tmp_path, capture_output=True, text=True, timeout=120)
     assert result.returncode == 2 and "unknown method 'magic'" in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
+
+
+def compare_config(*overrides):
+    from hydra import compose, initialize_config_dir
+
+    with initialize_config_dir(config_dir=str(ROOT / "recipes" / "compare"), version_base=None):
+        return compose(config_name="config", overrides=list(overrides))
+
+
+def test_method_seeds_give_a_method_its_own_seeds():
+    from recipes.compare import run
+
+    cfg = compare_config("methods=[lat,sac]", "robots=[a1]", "seeds=[0,1,2]", "+method_seeds.sac=[0]")
+    planned = run.jobs(cfg, run.check(cfg))
+    runs = sorted((job.labels["method"], Path(job.run_dir).name) for job in planned)
+    assert runs == [("lat", "a1_seed0"), ("lat", "a1_seed1"), ("lat", "a1_seed2"), ("sac", "a1_seed0")]
+    assert run.seeds_text(cfg) == "seeds [0, 1, 2] (sac: [0])"
+
+
+@pytest.mark.parametrize("method_seeds, message", [
+    ("magic=[0]", "method_seeds names 'magic', which is not in methods"),
+    ("sac=[]", "method_seeds.sac must be a non-empty list of seeds"),
+    ("sac=[-1]", "method_seeds.sac: seed -1 is not an integer >= 0"),
+    ("sac=0", "method_seeds.sac must be a non-empty list of seeds, got 0"),
+])
+def test_bad_method_seeds_are_refused_before_any_job(method_seeds, message):
+    from recipes.common.config import ConfigError
+    from recipes.compare import run
+
+    cfg = compare_config("methods=[lat,sac]", "robots=[a1]", f"+method_seeds.{method_seeds}")
+    with pytest.raises(ConfigError, match=message.replace("[", r"\[")):
+        run.check(cfg)
