@@ -27,7 +27,7 @@ from hierloco.components.sac_low_level import (
     train_sac_low_level,
 )
 from hierloco.io import write_text
-from hierloco.plots import plt, save_figure
+from recipes.sac_sac.report import learning_curve_markdown, plot_learning_curve, tracking_markdown
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -47,34 +47,6 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", default="results/sac_low_level_a1")
     return parser.parse_args(argv)
-
-
-def _table(report: dict) -> str:
-    lines = ["| command (vx, vy, wz) | achieved | linear error m/s | yaw-rate error rad/s | fell |",
-             "|---|---|---|---|---|"]
-    for row in report["rows"]:
-        c, a = row["command"], row["achieved"]
-        lines.append(f"| ({c[0]:+.2f}, {c[1]:+.2f}, {c[2]:+.2f}) | ({a[0]:+.3f}, {a[1]:+.3f}, {a[2]:+.3f}) | "
-                     f"{row['linear_error']:.3f} | {row['yaw_rate_error']:.3f} | {'yes' if row['fell'] else ''} |")
-    s = report["summary"]
-    lines.append(f"\nmean linear error {s['linear_error_mean']:.3f} m/s "
-                 f"(standing still: {s['linear_error_standing']:.3f}), "
-                 f"mean yaw-rate error {s['yaw_rate_error_mean']:.3f} rad/s (standing still: "
-                 f"{s['yaw_rate_error_standing']:.3f}), fall rate {s['fall_rate']:.2f}")
-    return "\n".join(lines)
-
-
-def plot_learning_curve(curve: list[dict], path: Path) -> None:
-    """Tracking error and reward per step against frames (exploring policy, as collected)."""
-    frames = [p["frames"] / 1e3 for p in curve]
-    fig, (left, right) = plt.subplots(1, 2, figsize=(9, 3.2))
-    left.plot(frames, [p["tracking_error"] for p in curve])
-    left.set(xlabel="frames (thousands)", ylabel="tracking error (m/s)", ylim=(0, None))
-    right.plot(frames, [p["reward"] for p in curve])
-    right.set(xlabel="frames (thousands)", ylabel="reward per step")
-    fig.suptitle("SAC-SAC low level: learning curve")
-    fig.tight_layout()
-    save_figure(fig, path)
 
 
 def main(argv=None) -> None:
@@ -100,16 +72,11 @@ def main(argv=None) -> None:
               "tracking_sac": sac, "tracking_ik": ik, "wall_clock_this_invocation": time.perf_counter() - start,
               "train_wall_clock_this_invocation": train_seconds}
     write_text(out / "report.json", json.dumps(report, indent=1))
-    curve = ["| frames | wall-clock s | updates | reward/step | tracking error m/s | falls per 1000 frames |",
-             "|---|---|---|---|---|---|"]
-    for p in meta["learning_curve"]:
-        curve.append(f"| {p['frames']} | {p['seconds']:.0f} | {p['updates']} | {p['reward']:.3f} | "
-                     f"{p['tracking_error']:.3f} | {p['falls_per_1000_frames']:.2f} |")
     text = (f"# SAC-SAC low level, {args.robot}\n\n{meta['frames']} frames, {meta['updates']} updates, "
             f"{meta['train_seconds'] / 60:.1f} min of training (all runs), settings {json.dumps(vars(args))}\n\n"
-            f"## Learning curve\n\n" + "\n".join(curve) +
-            f"\n\n## Tracking, SAC low level (deterministic actor)\n\n{_table(sac)}\n\n"
-            f"## Tracking, IK expert controller (reference)\n\n{_table(ik)}\n")
+            f"## Learning curve\n\n" + learning_curve_markdown(meta["learning_curve"]) +
+            f"\n\n## Tracking, SAC low level (deterministic actor)\n\n{tracking_markdown(sac)}\n\n"
+            f"## Tracking, IK expert controller (reference)\n\n{tracking_markdown(ik)}\n")
     write_text(out / "report.md", text)
     plot_learning_curve(meta["learning_curve"], out / "learning_curve.png")
     print(text)

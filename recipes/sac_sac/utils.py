@@ -11,6 +11,7 @@ from hierloco.components.sac_low_level import (
     train_sac_low_level,
 )
 from recipes.common import config, stages
+from recipes.sac_sac.report import write_low_level_report
 from recipes.sac import utils as sac
 
 METHOD = "sac_sac"
@@ -63,6 +64,10 @@ def build_tracking(run, params, low_level) -> TrackingReport:
     report = evaluate_velocity_tracking(low_level(len(commands)), commands, num_actions=params["num_actions"],
                                         seed=params["seed"], nthread=run.nthread)
     walking_video(run, low_level(1), run.path / "videos" / "sac_low_level_walking.mp4")
+    trained = low_level(1).trained
+    params = {"seed": run.cfg.seed, **config.section(run.cfg, "low_level")}
+    write_low_level_report(run.path, run.robot.name, trained.metadata, report, params, name="sac_low_level_report.md",
+                           train_seconds=run.dir.builds().get("sac_low_level", {}).get("seconds"))
     return TrackingReport(report)
 
 

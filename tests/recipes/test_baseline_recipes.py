@@ -40,6 +40,13 @@ def test_baseline_recipe_runs(method, settings, tmp_path):
         assert len(tracking["rows"]) == 27 and "fall_rate" in tracking["summary"]
         assert (tmp_path / "videos" / "sac_low_level_walking.mp4").stat().st_size > 1000
         assert (tmp_path / "sac_low_level.pt").exists() and not (tmp_path / "sac_low_level.training.pt").exists()
+        report = (tmp_path / "sac_low_level_report.md").read_text()  # its curve, the budget, tracking per command
+        assert "## Learning curve" in report and sum(line.startswith("| (") for line in report.splitlines()) == 27 and "frames" in report.split("\n")[2]
+        again = subprocess.run([sys.executable, str(ROOT / "recipes" / "sac_sac" / "report.py"), str(tmp_path),
+                                str(tmp_path / "report")], capture_output=True, text=True, timeout=120)
+        assert again.returncode == 0, again.stderr[-2000:]
+        assert (tmp_path / "report" / "report.md").read_text() == report
+        assert (tmp_path / "report" / "learning_curve.png").read_bytes()[:4] == b"\x89PNG"
     if method in ("sac", "sac_sac"):  # one SAC agent per task, trained on half the targets
         assert {p.name for p in tmp_path.glob("sac_*.pt") if "low_level" not in p.name} == {f"sac_{t}.pt" for t in
                                                               ("velocity_tracking", "goal_reaching",
