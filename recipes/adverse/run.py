@@ -11,6 +11,7 @@ LAT's goal-reaching video under every fault to ``videos/``, in ``out_dir``.
 
 import hierloco  # noqa: F401  (first: headless MuJoCo rendering is set before anything loads MuJoCo)
 
+import json
 import shutil
 import sys
 from pathlib import Path
@@ -53,6 +54,8 @@ def check(cfg) -> list:
             problems.append(f"unknown robot profile {profile!r} in faults (profiles: {', '.join(PROFILES)})")
         problems += [f"unknown setting {s!r} in faults.{profile} (settings: {', '.join(SETTINGS)})" for s in settings
                      if s not in SETTINGS]
+    problems += [f"method_overrides names {m!r}, which is in neither methods nor sample_methods"
+                 for m in cfg.method_overrides if m not in (*cfg.methods, *cfg.sample_methods)]
     problems += [f"samples must be integers >= 10, got {n!r}" for n in cfg.samples if not (isinstance(n, int) and
                                                                                            n >= 10)]
     if problems:
@@ -79,7 +82,8 @@ def fault_jobs(cfg, robots) -> tuple[list, list]:
                 settings = list(cfg.faults[profile])
                 for seed in cfg.seeds:
                     common = [f"preset={cfg.preset_name}", f"robot={spec.reference}", f"seed={seed}",
-                              f"robot_profile={profile}", "progress=false", *variant, *cfg.overrides]
+                              f"robot_profile={profile}", "progress=false", *variant, *cfg.overrides,
+                              *cfg.method_overrides.get(method, [])]
                     home = run_dir(method, cfg.preset_name, spec, profile, seed)
                     labels = {"method": method, "profile": profile}
                     paper = [s for s in settings if s in PAPER_SETTINGS] or ["normal"]
@@ -102,7 +106,7 @@ def sample_jobs(cfg, robots) -> list:
                     target = Path(cfg.out_dir) / "samples" / method / f"{spec.name}_seed{seed}_n{count}"
                     overrides = [f"preset={cfg.preset_name}", f"robot={spec.reference}", f"seed={seed}",
                                  "settings=[legs_disabled]", f"dynamics.num_transitions={count}", "progress=false",
-                                 "eval.videos=[]", *variant, *cfg.overrides]
+                                 "eval.videos=[]", *variant, *cfg.overrides, *cfg.method_overrides.get(method, [])]
                     jobs.append(studies.Job(recipe, str(target), overrides, labels={"method": method,
                                                                                     "samples": count},
                                             reuse_from=str(source), reuse_stages=TRAINING))
@@ -127,6 +131,24 @@ def achievable_speeds(results) -> str:
             lines.append(f"| {result.job.labels['method']} | {robot} | {result.job.labels['profile']} | "
                          f"{path.stem.removeprefix('dynamics_data_')} | {p(dx):.2f} | {p(-dx):.2f} | {p(dy):.2f} | "
                          f"{p(-dy):.2f} | {p(np.abs(dyaw)):.2f} | {data.metadata.get('dropped_failures', 0)} |")
+    return "\n".join(lines) + "\n"
+
+
+def low_level_checks(results) -> str:
+    """Per LAT run, how well its gait policy reproduces its experts in simulation (``gait_policy_check.json``): a
+    profile can leave it below the run's own bar if ``checks.min_reproduced_fraction`` was lowered for the study."""
+    lines = ["| robot | profile | run directory | experts reproduced within 0.05 m/s | median error m/s | fell |",
+             "|---|---|---|---|---|---|"]
+    for result in results:
+        path = Path(result.job.run_dir) / "gait_policy_check.json"
+        if result.job.labels.get("method") != "lat" or not path.exists() or result.job.reuse_from:
+            continue
+        check = json.loads(path.read_text())
+        errors = np.asarray(check["reproduction_error"], dtype=float)
+        robot = result.rows[0]["robot"] if result.rows else "?"
+        lines.append(f"| {robot} | {result.job.labels['profile']} | {result.job.run_dir} | "
+                     f"{100 * check['reproduced_fraction']:.0f}% | {np.median(errors):.3f} | "
+                     f"{int(np.isinf(errors).sum())} |")
     return "\n".join(lines) + "\n"
 
 
@@ -157,6 +179,8 @@ def main(cfg) -> None:
                                        "seeds; `_stiff`: under the stiff actuator profile.\n\n" + table
                                        + "\n## Speeds each fault leaves (random-action dynamics data)\n\n"
                                        + achievable_speeds(fault_results)
+                                       + "\n## LAT's low level: its experts reproduced in simulation\n\n"
+                                       + low_level_checks(fault_results)
                                        + ("\n## Runs that could not be evaluated\n\n" + notes if notes else ""))
         for result in fault_results:  # LAT under every fault
             if result.ok and result.job.labels["method"] == "lat":

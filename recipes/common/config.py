@@ -107,6 +107,20 @@ def make_task_from_spec(name: str, spec: dict):
 
 
 # ---------------------------------------------------------------------------------------------------- recipes
+QUALITY_BARS = {"min_expert_reach": (False, "(0, 1]"), "min_reproduced_fraction": (True, "[0, 1]")}  # zero allowed?
+
+
+def check_quality_bars(c: Checker) -> None:
+    """The ``checks.*`` bars (``recipes/common/conf/checks``), if the recipe has them: fractions, ``0`` allowed
+    only where it means "report, do not stop"."""
+    for key, (zero, interval) in QUALITY_BARS.items():
+        value = get(c.cfg, f"checks.{key}", None)
+        if value is None:
+            continue
+        if not (_is_number(value) and (0 <= value if zero else 0 < value) and value <= 1):
+            c.fail(f"checks.{key} must be a number in {interval}, got {value!r}")
+
+
 def check_common(c: Checker, robot_checks: bool = True) -> Any:
     """Seed, device, threads, settings, robot; returns the robot description (or ``None`` when it is bad)."""
     import torch
@@ -130,6 +144,7 @@ def check_common(c: Checker, robot_checks: bool = True) -> Any:
             c.fail(f"unknown setting {setting!r} (settings: {', '.join(SETTINGS)})")
     if len(set(settings)) != len(settings):
         c.fail(f"settings {settings} lists a setting twice")
+    check_quality_bars(c)
     robot = None
     if robot_checks:
         from hierloco.envs.robots.profiles import with_profile

@@ -17,7 +17,8 @@ def test_adverse_tiny(tmp_path):
     out = tmp_path / "adverse"
     command = [sys.executable, str(ROOT / "recipes" / "adverse" / "run.py"), "preset=tiny", "robots=[a1]", "seeds=[0]",
                "methods=[lat]", "profiles=[own]", "faults.own=[normal,rear_limp,one_leg_locked]", "samples=[50]",
-               "sample_methods=[lat]", f"out_dir={out}", 'overrides=["eval.generalization=null","eval.figures=false"]']
+               "sample_methods=[lat]", f"out_dir={out}", 'overrides=["eval.generalization=null","eval.figures=false"]',
+               '+method_overrides.lat=["checks.min_expert_reach=0.3"]']
     result = subprocess.run(command, cwd=tmp_path, env={**os.environ, "WANDB_MODE": "offline"}, capture_output=True,
                             text=True, timeout=1200)
     assert result.returncode == 1, result.stdout[-3000:] + result.stderr[-3000:]
@@ -27,6 +28,12 @@ def test_adverse_tiny(tmp_path):
     table = (out / "adverse.md").read_text()
     assert "| lat | a1 | own | one_leg_locked |" in table  # the speeds the fault leaves
     assert "## Runs that could not be evaluated" in table and "limp legs ['RR', 'RL']" in table
+    # how well LAT's low level reproduces its experts, per profile (one row per trained low level)
+    low_levels = table.split("## LAT's low level: its experts reproduced in simulation")[1]
+    assert low_levels.count("| a1 | own |") == 1, low_levels
+    # the per-method overrides reach every run of that method
+    assert all("checks.min_expert_reach=0.3" in log.read_text() for log in
+               [tmp_path / "outputs" / "lat" / "tiny" / "a1_seed0.log", out / "samples" / "lat" / "a1_seed0_n50.log"])
     assert {p.name for p in (out / "videos").iterdir()} == {f"a1_seed0_{s}_goal_reaching.mp4" for s in
                                                             ("normal", "one_leg_locked")}
     samples = read_csv(out / "samples.csv")

@@ -29,6 +29,8 @@ MISTAKES = [
     ("planner=fancy", "fancy"),
     ("+hardware.servo_latency=0.03", "no setting simulates the hardware robot"),
     ("+eval.tasks.goal_reaching.split=half", "split must be all or train, got 'half'"),
+    ("checks.min_expert_reach=0", "checks.min_expert_reach must be a number in (0, 1], got 0"),
+    ("checks.min_reproduced_fraction=1.5", "checks.min_reproduced_fraction must be a number in [0, 1], got 1.5"),
 ]
 
 
