@@ -173,14 +173,21 @@ class SACLowLevel(LowLevel):
         trained: a :class:`TrainedSACLowLevel`.
         steps_per_action: N control steps (100 Hz) per command.
         command_low, command_high: the action box (default the robot's command box).
+        stochastic: act with samples of the policy (what it was trained with) instead of its squashed mean; the
+            samples come from the low level's own random stream (``seed``), so a run is reproducible and the
+            global torch RNG is left as it was.
+        seed: the seed of that stream.
     """
 
     kind = "sac_command"
 
     def __init__(self, trained: TrainedSACLowLevel, steps_per_action: int = 100,
-                 command_low: Sequence[float] | None = None, command_high: Sequence[float] | None = None):
+                 command_low: Sequence[float] | None = None, command_high: Sequence[float] | None = None,
+                 stochastic: bool = False, seed: int = 0):
         if int(steps_per_action) < 1:
             raise ValueError(f"steps_per_action must be at least 1, got {steps_per_action}")
+        self.stochastic = bool(stochastic)
+        self._rng_state = torch.Generator().manual_seed(int(seed)).get_state() if self.stochastic else None
         self.trained = trained
         self.interface = trained.interface
         self.robot = trained.interface.robot
@@ -199,18 +206,28 @@ class SACLowLevel(LowLevel):
 
     def describe(self) -> dict:
         return {**super().describe(), "interface": self.interface.describe(),
-                "policy_frames": self.trained.metadata.get("frames")}
+                "policy_frames": self.trained.metadata.get("frames"), "stochastic": self.stochastic}
+
+    def _act(self, observation: np.ndarray) -> np.ndarray:
+        agent = self.trained.agent
+        if not self.stochastic:
+            return agent.act(torch.from_numpy(observation)).double().numpy()
+        with torch.random.fork_rng(devices=[]):  # this low level's own stream; the global one is restored after
+            torch.set_rng_state(self._rng_state)
+            action = agent.act(torch.from_numpy(observation), deterministic=False)
+            self._rng_state = torch.get_rng_state()
+        return action.double().numpy()
 
     def run(self, sim: BatchedSimulator, actions: np.ndarray) -> SimulationResult:
         commands = self._check(sim, actions)
         if self._time is None or len(self._time) != sim.num_robots:
             self._time = np.zeros(sim.num_robots)
             self._last_action = np.zeros((sim.num_robots, self.robot.num_joints))
-        agent, results = self.trained.agent, []
+        results = []
         with torch_threads(1):  # B small forward passes: one thread is fastest (see torch_threads)
             for _ in range(self.steps_per_action):
                 observation = self.interface.observe(sim.qpos, sim.qvel, commands, self._time, self._last_action)
-                action = agent.act(torch.from_numpy(observation)).double().numpy()
+                action = self._act(observation)
                 results.append(sim.run(self.interface.joint_targets(action)[:, None]))
                 self._time += CONTROL_TIMESTEP
                 self._last_action = action

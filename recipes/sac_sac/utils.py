@@ -24,6 +24,7 @@ class TrackingReport(stages.JsonReport):
 def checks(c: config.Checker, robot) -> None:
     config.check_experts(c, robot, library=False)
     sac.check_high_level(c)
+    c.choice("low_level_actor", ("stochastic", "deterministic"), "low-level actor")
     for key in ("low_level.total_frames", "low_level.num_robots", "low_level.hidden", "low_level.batch_size",
                 "low_level.buffer_size", "low_level.checkpoint_every", "tracking.points_per_axis",
                 "tracking.num_actions"):
@@ -41,9 +42,10 @@ def plan(cfg, robot) -> list[stages.Stage]:
     low = stages.Stage("sac_low_level", {"seed": cfg.seed, **config.section(cfg, "low_level")},
                        {"robot": robot_fingerprint(robot)}, "sac_low_level.pt", TrainedSACLowLevel, build_low_level)
     report = stages.Stage("sac_low_level_tracking", {"seed": cfg.seed, "steps_per_action": cfg.steps_per_action,
-                                                     **config.section(cfg, "tracking")},
+                                                     "actor": cfg.low_level_actor, **config.section(cfg, "tracking")},
                           {"sac_low_level": low.digest}, "sac_low_level_tracking.json", TrackingReport, build_tracking)
-    low_level = {"kind": "sac_command", "sac_low_level": low.digest, "steps_per_action": cfg.steps_per_action}
+    low_level = {"kind": "sac_command", "sac_low_level": low.digest, "steps_per_action": cfg.steps_per_action,
+                 "actor": cfg.low_level_actor}
     return [low, report, *sac.high_level_stages(cfg, low_level)]
 
 
@@ -87,10 +89,18 @@ def walking_video(run, low_level, path) -> None:
     save_video(render_frames(run.robot, np.concatenate(qpos)[::5]), path, fps=20)
 
 
+def low_level_options(cfg) -> dict:
+    """How the trained policy runs as the low level (``SACLowLevel``'s options), as the recipe and ``load_run``
+    build it."""
+    return {"steps_per_action": cfg.steps_per_action, "stochastic": cfg.low_level_actor == "stochastic",
+            "seed": cfg.seed}
+
+
 def manifest(cfg, robot) -> dict:
-    return {"low_level": {"kind": "sac_command", "options": {"steps_per_action": cfg.steps_per_action}}}
+    return {"low_level": {"kind": "sac_command", "options": low_level_options(cfg)}}
 
 
 def make_low_level(run, trained: TrainedSACLowLevel):
-    """The trained velocity policy as a low level; it keeps a clock per robot, so each env gets its own."""
-    return lambda num_robots: SACLowLevel(trained, steps_per_action=run.cfg.steps_per_action)
+    """The trained velocity policy as a low level; it keeps a clock per robot (and, stochastic, its own random
+    stream), so each env gets its own."""
+    return lambda num_robots: SACLowLevel(trained, **low_level_options(run.cfg))

@@ -91,6 +91,30 @@ def test_low_level_runs_the_actor_closed_loop(trained):
     assert low.describe()["kind"] == "sac_command" and low.describe()["policy_frames"] == 1536
 
 
+def test_a_stochastic_low_level_samples_its_policy_from_its_own_seeded_stream(trained):
+    """Samples of the policy (what it was trained with) instead of its mean: the same seed gives the same motion,
+    another seed or the mean another, and the global torch RNG is left where it was."""
+    result, _ = trained
+    commands = np.array([[0.2, 0.0, 0.0], [0.0, -0.1, 0.3]])
+
+    def motion(**options):
+        sim = BatchedSimulator("a1", 2, seed=0)
+        low = SACLowLevel(result, steps_per_action=5, **options)
+        states = [low.run(sim, commands).com_state for _ in range(2)]
+        return np.concatenate(states, 1), low
+
+    torch.manual_seed(123)
+    before = torch.get_rng_state()
+    first, low = motion(stochastic=True, seed=7)
+    assert torch.equal(torch.get_rng_state(), before)  # the global stream is untouched
+    again, _ = motion(stochastic=True, seed=7)
+    np.testing.assert_array_equal(first, again)
+    other, _ = motion(stochastic=True, seed=8)
+    mean, _ = motion()
+    assert not np.array_equal(first, other) and not np.array_equal(first, mean)
+    assert low.describe()["stochastic"] is True
+
+
 def test_low_level_serves_the_latent_action_env(trained):
     result, _ = trained
     low = SACLowLevel(result, steps_per_action=4)

@@ -50,7 +50,7 @@ def leaves(node, prefix=""):
 NO_OTHER_VALUE = {("lib", "planner.name"), ("sac", "settings"), ("sac_sac", "settings")}  # one planner, one setting
 SPECIAL = {"steps_per_action": 200, "policy.latent_dim": 3, "planner.name": "cem", "robot": "daisy",
            "settings": ["legs_disabled"], "device": None, "planner.top_k": 20,
-           "sac.gamma": 0.9, "dynamics.holdout": 0.2}
+           "sac.gamma": 0.9, "dynamics.holdout": 0.2, "low_level_actor": "deterministic"}
 
 
 def changed_value(key: str, value):
