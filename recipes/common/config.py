@@ -8,6 +8,7 @@ config: the library takes keyword arguments.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Any, Callable, Iterable
 
 from omegaconf import DictConfig, ListConfig, OmegaConf, open_dict
@@ -262,6 +263,24 @@ def check_logger(c: Checker) -> None:
         if backend not in BACKENDS:
             c.fail(f"unknown logger backend {backend!r} (backends: {', '.join(BACKENDS)})")
     c.choice("logger.wandb_mode", ("offline", "online"), "wandb mode")
+
+
+def compose_recipe(method: str, overrides: Iterable[str]) -> DictConfig:
+    """``recipes/<method>/config.yaml`` with ``overrides``, composed as its ``train.py`` would compose it; callable
+    inside another Hydra app (the study drivers): Hydra's global state is restored afterwards."""
+    from hydra import compose, initialize_config_dir
+    from hydra.core.global_hydra import GlobalHydra
+
+    directory = Path(__file__).resolve().parents[1] / method
+    outer = GlobalHydra.instance().hydra if GlobalHydra.instance().is_initialized() else None
+    GlobalHydra.instance().clear()
+    try:
+        with initialize_config_dir(config_dir=str(directory), version_base=None):
+            return compose(config_name="config", overrides=list(overrides))
+    finally:
+        GlobalHydra.instance().clear()
+        if outer is not None:
+            GlobalHydra.instance().initialize(outer)
 
 
 def prepare(cfg: DictConfig, checks: Callable[[Checker, Any], None] | None = None, *,

@@ -83,13 +83,34 @@ def resolve_method(name: str, variants) -> tuple[str, list[str]]:
 
 
 def finished(job: Job) -> bool:
-    """Whether ``job`` already finished in its run directory with the same method and overrides."""
+    """Whether ``job`` already finished in its run directory with the same method and overrides, and every stage
+    its recipe plans today is there with the key it has today (a changed default or code path that enters a key
+    makes the job run again, and the run then names the stage that changed)."""
     marker = Path(job.run_dir) / DONE
     if not marker.exists() or not (Path(job.run_dir) / "episodes.csv").exists():
         return False
     try:
-        return json.loads(marker.read_text()).get("signature") == job.signature()
+        if json.loads(marker.read_text()).get("signature") != job.signature():
+            return False
     except (OSError, json.JSONDecodeError):
+        return False
+    return stages_current(job)
+
+
+def stages_current(job: Job) -> bool:
+    """Whether every stage of the job's plan (its recipe's config from its overrides, planned as the recipe would
+    now) is finished in its run directory with the same key; no work is done and nothing is written."""
+    import importlib
+
+    from hierloco.runs import RunDirectory
+    from recipes.common.config import compose_recipe, prepare
+
+    try:
+        cfg = compose_recipe(job.method, [f"run_dir={job.run_dir}", *job.overrides])
+        utils = importlib.import_module(f"recipes.{job.method}.utils")
+        specs = [stage.spec for stage in utils.plan(cfg, prepare(cfg, utils.checks))]
+        return all(RunDirectory(job.run_dir, readonly=True).verify(specs).values())
+    except Exception:  # noqa: BLE001  (any config or key problem: run the job, which reports it properly)
         return False
 
 

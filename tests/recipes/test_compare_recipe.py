@@ -64,6 +64,24 @@ def test_compare_through_ray_equals_the_jobs_one_by_one(tmp_path):
     stages, _ = job_compute(str(by_ray / "outputs" / "ik" / "tiny" / "a1_seed0"))
     assert "dynamics_data_normal" in stages and all(v is not None and v > 0 for v in stages.values()), stages
 
+    # a finished job is reused only while every stage its recipe plans today has the key on disk: a stage made
+    # with another config (as after a changed default) makes it run again, and the run names that stage
+    import json
+
+    from recipes.common.studies import Job, finished
+
+    run_dir = by_ray / "outputs" / "ik" / "tiny" / "a1_seed1"
+    job = Job("ik", str(run_dir), json.loads((run_dir / "job.json").read_text())["signature"]["overrides"])
+    assert finished(job)
+    key_path = run_dir / "dynamics_model_normal.pt.key.json"
+    key = json.loads(key_path.read_text())
+    key["params"]["lr"] = 2 * key["params"]["lr"]
+    key_path.write_text(json.dumps(key))
+    assert not finished(job)
+    stale = compare(by_ray, f"out_dir={by_ray / 'out'}")
+    assert stale.returncode == 1 and "study: 4 jobs, 3 reused" in stale.stdout, stale.stdout[-2000:]
+    assert "stage 'dynamics_model_normal'" in stale.stderr and "made with another config" in stale.stderr
+
 
 @pytest.mark.slow
 def test_a_failed_job_is_reported_and_the_others_go_on(tmp_path):
