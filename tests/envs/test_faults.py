@@ -82,3 +82,11 @@ def test_the_stiff_profile_has_stiffer_servos_and_low_friction_contacts():
     assert feet and all(abs(c.friction[0] - 0.4) < 1e-9 for c in feet), [c.friction[0] for c in feet]
     with pytest.raises(ValueError, match="unknown robot profile 'soft'"):
         with_profile(a1, "soft")
+
+
+def test_the_stiff_servos_profile_changes_the_servos_only():
+    a1 = get_robot("a1")
+    servos, stiff = with_profile(a1, "stiff_servos"), with_profile(a1, "stiff")
+    assert servos.kp == stiff.kp and servos.torque_limit == stiff.torque_limit
+    assert servos.foot_friction == a1.foot_friction != stiff.foot_friction
+    assert len({robot_fingerprint(r) for r in (a1, servos, stiff)}) == 3

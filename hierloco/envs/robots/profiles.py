@@ -5,6 +5,7 @@
 - ``stiff``: close to the position control with effectively unlimited force and low friction of the PyBullet robots
   the paper used (Li et al., Sec. IV-C): servo gains and torque limits three times the robot's, and a contact
   friction of 0.4.
+- ``stiff_servos``: the servos of ``stiff`` with the robot's own contacts, to tell the two changes apart.
 
 Example:
     >>> from hierloco.envs.robots import get_robot
@@ -21,15 +22,19 @@ STIFF_SCALE = 3.0
 STIFF_FRICTION = 0.4
 
 
-def _stiff(robot: RobotSpec) -> RobotSpec:
+def _stiff_servos(robot: RobotSpec) -> RobotSpec:
     if robot.kp is None or robot.torque_limit is None:
-        raise ValueError(f"robot {robot.name!r}: the stiff profile scales kp and torque_limit, which the description "
+        raise ValueError(f"robot {robot.name!r}: the stiff profiles scale kp and torque_limit, which the description "
                          "does not give")
     return robot.replace(kp=tuple(STIFF_SCALE * k for k in robot.kp),
-                         torque_limit=tuple(STIFF_SCALE * t for t in robot.torque_limit), foot_friction=STIFF_FRICTION)
+                         torque_limit=tuple(STIFF_SCALE * t for t in robot.torque_limit))
 
 
-PROFILES = {"own": lambda robot: robot, "stiff": _stiff}
+def _stiff(robot: RobotSpec) -> RobotSpec:
+    return _stiff_servos(robot).replace(foot_friction=STIFF_FRICTION)
+
+
+PROFILES = {"own": lambda robot: robot, "stiff": _stiff, "stiff_servos": _stiff_servos}
 
 
 def with_profile(robot: RobotSpec, profile: str = "own") -> RobotSpec:
