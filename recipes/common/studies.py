@@ -127,7 +127,8 @@ def execute(job: Job, fetch_run_dir: bool = False) -> dict:
     with open(log, "a") as out:  # appended: a re-run (reusing stages) keeps the log of the run that built them
         out.write(f"=== {time.strftime('%Y-%m-%d %H:%M:%S UTC', time.gmtime())}: {' '.join(job.command())}\n")
         out.flush()
-        code = subprocess.run(job.command(), stdout=out, stderr=subprocess.STDOUT, env=env, cwd=os.getcwd()).returncode
+        code = subprocess.run(job.command(), stdout=out, stderr=subprocess.STDOUT, env=env, cwd=os.getcwd(),
+                              preexec_fn=_die_with_parent).returncode
     outcome = {"ok": code == 0, "seconds": time.perf_counter() - start, "rows": [], "error": "", "archive": None}
     if code != 0:
         tail = log.read_text().strip().splitlines()[-3:]
@@ -141,6 +142,17 @@ def execute(job: Job, fetch_run_dir: bool = False) -> dict:
             archive.add(job.run_dir, arcname=".")
         outcome["archive"] = buffer.getvalue()
     return outcome
+
+
+def _die_with_parent() -> None:
+    """In the job's subprocess, before the recipe starts (Linux): a SIGTERM when the Ray worker running it dies, so
+    a killed study leaves no recipe running on (finished stages are kept; the run directory's lock is released)."""
+    if sys.platform.startswith("linux"):
+        import ctypes
+        import signal
+
+        PR_SET_PDEATHSIG = 1
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
 
 
 def _reuse_stages(source: Path, target: Path, stages) -> None:
