@@ -60,6 +60,10 @@ def recipe_main(recipe_file: str, config_name: str = "config") -> Callable:
             os.environ.setdefault("HYDRA_FULL_ERROR", "1")  # Hydra raises its own errors; this wrapper reports them
             from hydra.errors import HydraException
 
+            from recipes.common.studies import die_with_parent
+
+            die_with_parent()  # a job of a study ends with the study's worker
+
             try:
                 return task()
             except KeyboardInterrupt:

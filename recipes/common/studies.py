@@ -34,6 +34,7 @@ from hierloco.results import read_csv
 RECIPES = Path(__file__).resolve().parents[1]
 METHODS = tuple(sorted(p.name for p in RECIPES.iterdir() if (p / "train.py").exists()))
 DONE = "job.json"  # written into a job's run directory when it finished
+PARENT_PID = "HIERLOCO_PARENT_PID"  # set for a job's recipe: the worker it dies with (die_with_parent)
 
 
 @dataclass
@@ -127,8 +128,8 @@ def execute(job: Job, fetch_run_dir: bool = False) -> dict:
     with open(log, "a") as out:  # appended: a re-run (reusing stages) keeps the log of the run that built them
         out.write(f"=== {time.strftime('%Y-%m-%d %H:%M:%S UTC', time.gmtime())}: {' '.join(job.command())}\n")
         out.flush()
-        code = subprocess.run(job.command(), stdout=out, stderr=subprocess.STDOUT, env=env, cwd=os.getcwd(),
-                              preexec_fn=_die_with_parent).returncode
+        code = subprocess.run(job.command(), stdout=out, stderr=subprocess.STDOUT, cwd=os.getcwd(),
+                              env={**env, PARENT_PID: str(os.getpid())}).returncode
     outcome = {"ok": code == 0, "seconds": time.perf_counter() - start, "rows": [], "error": "", "archive": None}
     if code != 0:
         tail = log.read_text().strip().splitlines()[-3:]
@@ -144,15 +145,20 @@ def execute(job: Job, fetch_run_dir: bool = False) -> dict:
     return outcome
 
 
-def _die_with_parent() -> None:
-    """In the job's subprocess, before the recipe starts (Linux): a SIGTERM when the Ray worker running it dies, so
-    a killed study leaves no recipe running on (finished stages are kept; the run directory's lock is released)."""
-    if sys.platform.startswith("linux"):
-        import ctypes
-        import signal
+def die_with_parent() -> None:
+    """Called by a recipe as it starts (Linux): if a study's worker started it (``HIERLOCO_PARENT_PID``), it gets a
+    SIGTERM when that worker dies, so a killed study leaves no recipe running on (finished stages are kept, the run
+    directory's lock is released); if the worker is already gone, it stops at once."""
+    parent = os.environ.get(PARENT_PID)
+    if not parent or not sys.platform.startswith("linux"):
+        return
+    import ctypes
+    import signal
 
-        PR_SET_PDEATHSIG = 1
-        ctypes.CDLL("libc.so.6", use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+    PR_SET_PDEATHSIG = 1
+    ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+    if os.getppid() != int(parent):  # the worker died before the line above
+        sys.exit("the study worker that started this run is gone")
 
 
 def _reuse_stages(source: Path, target: Path, stages) -> None:

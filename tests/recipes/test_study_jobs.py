@@ -1,4 +1,5 @@
-"""A study's job subprocess dies with the worker that runs it, so a killed study leaves no recipe running on."""
+"""A study's job subprocess dies with the worker that runs it, so a killed study leaves no recipe running on
+(``recipes.common.studies.die_with_parent``, called by every recipe as it starts)."""
 
 import os
 import signal
@@ -8,10 +9,11 @@ import time
 
 import pytest
 
-PARENT = """
-import subprocess, sys, time
-from recipes.common.studies import _die_with_parent
-child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(120)"], preexec_fn=_die_with_parent)
+CHILD = "from recipes.common.studies import die_with_parent; die_with_parent(); import time; time.sleep(120)"
+PARENT = f"""
+import os, subprocess, sys, time
+env = {{**os.environ, "HIERLOCO_PARENT_PID": str(os.getpid())}}
+child = subprocess.Popen([sys.executable, "-c", {CHILD!r}], env=env)
 print(child.pid, flush=True)
 time.sleep(120)
 """
