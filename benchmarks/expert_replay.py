@@ -19,9 +19,10 @@ from pathlib import Path
 
 import numpy as np
 
-from hierloco.components.expert_library import ExpertLibrary, action_motion
+from hierloco.components.evaluation import action_velocities
+from hierloco.components.expert_library import ExpertLibrary
 from hierloco.envs.batched_sim import BatchedSimulator
-from hierloco.envs.robots import CONTROL_TIMESTEP, get_robot
+from hierloco.envs.robots import get_robot
 from hierloco.envs.robots.profiles import with_profile
 
 
@@ -33,9 +34,7 @@ def replay(run_dir: Path, num_actions: int = 4) -> dict:
     sim = BatchedSimulator(robot, len(targets), seed=0, nthread=1)
     results = [sim.run(targets) for _ in range(num_actions)]
     sim.close()
-    fell = np.any([r.failed[:, -1] for r in results], axis=0)
-    velocities = [action_motion(np.concatenate([p.com_state[:, -1:], c.com_state], 1),
-                                targets.shape[1] * CONTROL_TIMESTEP)[1] for p, c in zip(results[:-1], results[1:])]
+    velocities, fell = action_velocities(results, targets.shape[1])
     error = np.linalg.norm(np.mean(velocities, 0) - library.velocity_local, axis=-1)
     error[fell] = np.inf
     out = {"run_dir": str(run_dir), "robot": run["robot"], "profile": run.get("robot_profile", "own"),

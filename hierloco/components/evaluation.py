@@ -141,6 +141,18 @@ def latent_grid_paths(low_level, *, grid: int = 7, num_actions: int = 3, seed: i
     return latents, np.concatenate(paths, 1)
 
 
+def action_velocities(results, steps_per_action: int) -> tuple[list[np.ndarray], np.ndarray]:
+    """The mean CoM velocity of each action after the first (``B x 2`` each, in that action's start frame) of
+    successive :class:`~hierloco.envs.batched_sim.SimulationResult` s of the same robots, and which robots fell
+    (``B`` bool) by the end of any action."""
+    from hierloco.components.expert_library import action_motion
+
+    duration = steps_per_action * CONTROL_TIMESTEP
+    velocities = [action_motion(np.concatenate([previous.com_state[:, -1:], current.com_state], 1), duration)[1]
+                  for previous, current in zip(results[:-1], results[1:])]
+    return velocities, np.any([r.failed[:, -1] for r in results], axis=0)
+
+
 def check_gait_policy(low_level, library, latents: np.ndarray, *, num_pairs: int = 50, num_actions: int = 4,
                       seed: int = 0) -> dict:
     """How well ``pi(., z)`` reproduces and interpolates the experts, in simulation (Li et al., RA-L 2021, Sec. III-B:
@@ -156,7 +168,6 @@ def check_gait_policy(low_level, library, latents: np.ndarray, *, num_pairs: int
       ``interpolation_between``: the fraction that also move between the two experts (within 0.05 m/s of the
       segment joining their velocities).
     """
-    from hierloco.components.expert_library import action_motion
     from hierloco.envs.batched_sim import BatchedSimulator
 
     rng = np.random.default_rng(seed)
@@ -164,15 +175,9 @@ def check_gait_policy(low_level, library, latents: np.ndarray, *, num_pairs: int
     pairs = np.array([rng.choice(len(latents), 2, replace=False) for _ in range(num_pairs)])
     queries = np.concatenate([latents, 0.5 * (latents[pairs[:, 0]] + latents[pairs[:, 1]])])
     sim = BatchedSimulator(low_level.robot, len(queries), seed=seed)
-    n = low_level.steps_per_action
     results = [low_level.run(sim, queries) for _ in range(num_actions)]
     sim.close()
-    fell = np.any([r.failed[:, -1] for r in results], axis=0)
-    duration = n * CONTROL_TIMESTEP
-    velocities = []
-    for previous, current in zip(results[:-1], results[1:]):
-        states = np.concatenate([previous.com_state[:, -1:], current.com_state], 1)
-        velocities.append(action_motion(states, duration)[1])
+    velocities, fell = action_velocities(results, low_level.steps_per_action)
     velocity = np.mean(velocities, 0)
     g = len(latents)
     error = np.linalg.norm(velocity[:g] - library.velocity_local, axis=-1)
