@@ -136,11 +136,13 @@ def main(argv=None) -> None:
 
     argv = sys.argv[1:] if argv is None else argv
     if len(argv) != 2:
-        sys.exit("usage: python recipes/sac_sac/report.py RUN_DIR OUT_DIR")
+        print("error: usage: python recipes/sac_sac/report.py RUN_DIR OUT_DIR", file=sys.stderr)
+        sys.exit(2)
     run_dir, out = Path(argv[0]), Path(argv[1])
     missing = [n for n in ("sac_low_level.pt", "sac_low_level_tracking.json") if not (run_dir / n).exists()]
     if missing:
-        sys.exit(f"{run_dir} has no finished SAC-SAC low level: missing {', '.join(missing)}")
+        print(f"error: {run_dir} has no finished SAC-SAC low level: missing {', '.join(missing)}", file=sys.stderr)
+        sys.exit(2)
     trained = TrainedSACLowLevel.load(run_dir / "sac_low_level.pt")
     tracking = json.loads((run_dir / "sac_low_level_tracking.json").read_text())
     params = json.loads((run_dir / "sac_low_level.pt.key.json").read_text())["params"]

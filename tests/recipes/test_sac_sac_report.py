@@ -36,5 +36,6 @@ def test_a_short_curve_is_not_judged():
 def test_the_report_refuses_a_run_without_a_low_level(tmp_path):
     result = subprocess.run([sys.executable, str(ROOT / "recipes" / "sac_sac" / "report.py"), str(tmp_path),
                              str(tmp_path / "out")], capture_output=True, text=True, timeout=120)
-    assert result.returncode == 1 and "missing sac_low_level.pt, sac_low_level_tracking.json" in result.stderr
+    assert result.returncode == 2 and "missing sac_low_level.pt, sac_low_level_tracking.json" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "out").exists()
