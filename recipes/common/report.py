@@ -149,19 +149,26 @@ def job_compute(run_dir: str) -> tuple[dict[str, float | None], dict]:
     return {name: builds.get(name, {}).get("seconds") for name in stages}, builds
 
 
+def _reuse_word(result, source: str) -> str:
+    if not result.reused:
+        return "no"
+    return "yes" if source == result.job.run_dir else "from its record"
+
+
 def wallclock_markdown(results) -> str:
     """``wallclock.md``: each job's wall-clock in this study and the compute its stages took when they were built
     (reused stages included), then the compute per method and robot, and what that is on the study's cores."""
     lines = ["# Wall-clock per job", "",
              "*this study*: the job's wall-clock now (a reused job or stage costs nothing); *compute*: the sum, over the "
              "stages the job needs, of what building each took (`builds.json`), with the threads it had then.", "",
-             "| method | run directory | this study (min) | compute (min) | threads | stages not recorded | reused |",
+             "| method | run directory (or record) | this study (min) | compute (min) | threads | stages not recorded | reused |",
              "|---|---|---|---|---|---|---|"]
     per_method: dict[tuple[str, str], list[float]] = {}
     for result in results:
-        seconds = result.seconds if not result.reused else _recorded_seconds(result.job.run_dir)
+        source = getattr(result, "source", "") or result.job.run_dir  # the run directory, or the job's record
+        seconds = result.seconds if not result.reused else _recorded_seconds(source)
         method = result.job.labels.get("method", result.job.method)
-        stages, builds = job_compute(result.job.run_dir)
+        stages, builds = job_compute(source)
         known = [v for v in stages.values() if v is not None]
         missing = sum(v is None for v in stages.values())
         threads = sorted({b.get("threads") for n, b in builds.items() if n in stages and b.get("threads")})
@@ -169,8 +176,8 @@ def wallclock_markdown(results) -> str:
         robot = Path(result.job.run_dir).name.rsplit("_seed", 1)[0]
         if stages and not missing:
             per_method.setdefault((method, robot), []).append(compute)
-        lines.append(f"| {method} | {result.job.run_dir} | {seconds / 60:.1f} | {compute / 60:.1f} | "
-                     f"{', '.join(map(str, threads)) or '-'} | {missing} | {'yes' if result.reused else 'no'} |")
+        lines.append(f"| {method} | {source} | {seconds / 60:.1f} | {compute / 60:.1f} | "
+                     f"{', '.join(map(str, threads)) or '-'} | {missing} | {_reuse_word(result, source)} |")
     if per_method:
         lines += ["", "## Compute per method and robot (jobs with every stage recorded)", "",
                   "| method | robot | jobs | compute per job (min) | compute in all (min) |", "|---|---|---|---|---|"]

@@ -6,7 +6,10 @@ started for the study, or on the cluster at ``address`` / ``RAY_ADDRESS``. Each 
 with as many simulation and torch threads as it has cores, so jobs never oversubscribe the machine. Finished jobs
 are reused from their run directories (a killed study, re-run, resubmits only what did not finish); a failed job
 is reported with its run directory and the others go on; the rows of every job come back to the driver through Ray,
-so a cluster without shared storage works too (``fetch_run_dirs=True`` also brings each run directory back).
+so a cluster without shared storage works too (``fetch_run_dirs=True`` also brings each run directory back). With a
+``records`` directory (``recipes/common/records.py``) every finished job also leaves its small record there, and a
+job whose run directory is missing is taken from its record while its stage keys are today's: a study runs in parts,
+on several machines or sessions.
 
 Example:
     >>> jobs = [Job("lat", "outputs/lat/tiny/a1_seed0", ["preset=tiny"]), Job("lib", "outputs/lib/tiny/a1_seed0",
@@ -30,6 +33,7 @@ from typing import Sequence
 
 from hierloco.io import write_text
 from hierloco.results import read_csv
+from recipes.common import records as job_records
 
 RECIPES = Path(__file__).resolve().parents[1]
 METHODS = tuple(sorted(p.name for p in RECIPES.iterdir() if (p / "train.py").exists()))
@@ -65,6 +69,10 @@ class JobResult:
     seconds: float
     reused: bool = False
     error: str = ""
+    source: str = ""  # the directory its rows and timings came from: the run directory, or the job's record
+
+    def __post_init__(self):
+        self.source = self.source or self.job.run_dir
 
 
 def resolve_method(name: str, variants) -> tuple[str, list[str]]:
@@ -98,21 +106,39 @@ def finished(job: Job) -> bool:
     return stages_current(job)
 
 
+def planned_stages(job: Job) -> list:
+    """The stages (``StageSpec``: name, key, file) the job's recipe plans today from its overrides; nothing is
+    built or written."""
+    import importlib
+
+    from recipes.common.config import compose_recipe, prepare
+
+    cfg = compose_recipe(job.method, [f"run_dir={job.run_dir}", *job.overrides])
+    utils = importlib.import_module(f"recipes.{job.method}.utils")
+    return [stage.spec for stage in utils.plan(cfg, prepare(cfg, utils.checks))]
+
+
 def stages_current(job: Job) -> bool:
     """Whether every stage of the job's plan (its recipe's config from its overrides, planned as the recipe would
     now) is finished in its run directory with the same key; no work is done and nothing is written."""
-    import importlib
-
     from hierloco.runs import RunDirectory
-    from recipes.common.config import compose_recipe, prepare
 
     try:
-        cfg = compose_recipe(job.method, [f"run_dir={job.run_dir}", *job.overrides])
-        utils = importlib.import_module(f"recipes.{job.method}.utils")
-        specs = [stage.spec for stage in utils.plan(cfg, prepare(cfg, utils.checks))]
-        return all(RunDirectory(job.run_dir, readonly=True).verify(specs).values())
+        return all(RunDirectory(job.run_dir, readonly=True).verify(planned_stages(job)).values())
     except Exception:  # noqa: BLE001  (any config or key problem: run the job, which reports it properly)
         return False
+
+
+def recorded(job: Job, records: str) -> bool:
+    """Whether the job's record under ``records`` is of this job (method, overrides) with today's stage keys."""
+    directory = job_records.record_dir(records, job.run_dir)
+    if not (directory / DONE).is_file():
+        return False
+    try:
+        specs = planned_stages(job)
+    except Exception:  # noqa: BLE001  (a config problem: run the job, which reports it properly)
+        return False
+    return job_records.current(directory, job.signature(), specs)
 
 
 def execute(job: Job, fetch_run_dir: bool = False) -> dict:
@@ -130,13 +156,15 @@ def execute(job: Job, fetch_run_dir: bool = False) -> dict:
         out.flush()
         code = subprocess.run(job.command(), stdout=out, stderr=subprocess.STDOUT, cwd=os.getcwd(),
                               env={**env, PARENT_PID: str(os.getpid())}).returncode
-    outcome = {"ok": code == 0, "seconds": time.perf_counter() - start, "rows": [], "error": "", "archive": None}
+    outcome = {"ok": code == 0, "seconds": time.perf_counter() - start, "rows": [], "error": "", "archive": None,
+               "record": None}
     if code != 0:
         tail = log.read_text().strip().splitlines()[-3:]
         outcome["error"] = f"exit code {code}: " + " | ".join(tail) + f" (log: {log})"
         return outcome
     outcome["rows"] = read_csv(Path(job.run_dir) / "episodes.csv")
     write_text(Path(job.run_dir) / DONE, json.dumps({"signature": job.signature(), "seconds": outcome["seconds"]}))
+    outcome["record"] = job_records.files_of(job.run_dir)  # small: back to the driver, which may keep it (records)
     if fetch_run_dir:
         buffer = io.BytesIO()
         with tarfile.open(fileobj=buffer, mode="w:gz") as archive:
@@ -186,14 +214,36 @@ def _progress(done: int, running: int, failed: int, pending: int, start: float, 
     return line
 
 
+def check_records(records) -> None:
+    """Refuses a ``records`` setting that is not a directory path (or null), before any work."""
+    from recipes.common.config import ConfigError
+
+    if records is None:
+        return
+    if not isinstance(records, str) or not records.strip():
+        raise ConfigError(f"records must be a directory path or null, got {records!r}")
+    if Path(records).exists() and not Path(records).is_dir():
+        raise ConfigError(f"records={records} exists and is not a directory")
+
+
+def _keep_record(records: str | None, job: Job, record: dict | None) -> None:
+    if records and record:
+        job_records.save(record, job_records.record_dir(records, job.run_dir))
+
+
 def run_jobs(jobs: Sequence[Job], *, address: str | None = None, cores_per_job: int | None = None,
-             fetch_run_dirs: bool = False, progress_every: float = 30.0) -> list[JobResult]:
-    """Runs ``jobs`` through Ray (see the module docstring) and returns one :class:`JobResult` per job, in order."""
+             fetch_run_dirs: bool = False, records: str | None = None,
+             progress_every: float = 30.0) -> list[JobResult]:
+    """Runs ``jobs`` through Ray (see the module docstring) and returns one :class:`JobResult` per job, in order.
+    With ``records`` (a directory), every finished job leaves its record there and a job missing from its run
+    directory is taken from its current record (``recipes/common/records.py``)."""
     import ray
 
+    check_records(records)
     results: dict[int, JobResult] = {}
     todo = []
     address = address or os.environ.get("RAY_ADDRESS")
+    from_records = 0
     for index, job in enumerate(jobs):
         if not address:  # local workers share this file system: give them absolute paths
             job.run_dir = str(Path(job.run_dir).resolve())
@@ -201,9 +251,15 @@ def run_jobs(jobs: Sequence[Job], *, address: str | None = None, cores_per_job: 
             job.cores = int(cores_per_job)
         if finished(job):
             results[index] = JobResult(job, True, read_csv(Path(job.run_dir) / "episodes.csv"), 0.0, reused=True)
+            _keep_record(records, job, job_records.files_of(job.run_dir))
+        elif records and not (Path(job.run_dir) / DONE).exists() and recorded(job, records):
+            source = job_records.record_dir(records, job.run_dir)
+            results[index] = JobResult(job, True, job_records.rows(source), 0.0, reused=True, source=str(source))
+            from_records += 1
         else:
             todo.append(index)
-    print(f"study: {len(jobs)} jobs, {len(jobs) - len(todo)} reused from their run directories", flush=True)
+    line = f"study: {len(jobs)} jobs, {len(jobs) - len(todo) - from_records} reused from their run directories"
+    print(line + (f", {from_records} from their records in {records}" if records else ""), flush=True)
     if todo:
         started_here = not ray.is_initialized()
         if started_here:
@@ -233,6 +289,8 @@ def run_jobs(jobs: Sequence[Job], *, address: str | None = None, cores_per_job: 
                         archive.extractall(job.run_dir, filter="data")
                 results[index] = JobResult(job, outcome["ok"], outcome["rows"], outcome["seconds"],
                                            error=outcome["error"])
+                if outcome["ok"]:
+                    _keep_record(records, job, outcome.get("record"))
                 durations.append(outcome["seconds"])
                 finished_at = time.perf_counter()
                 if not outcome["ok"]:
@@ -279,5 +337,5 @@ def run_here(job: Job) -> list[dict]:
     return outcome["rows"]
 
 
-__all__ = ["DONE", "METHODS", "Job", "JobResult", "execute", "finished", "report_failures", "resolve_method", "rows_of",
-           "run_here", "run_jobs"]
+__all__ = ["DONE", "METHODS", "Job", "JobResult", "check_records", "execute", "finished", "planned_stages", "recorded",
+           "report_failures", "resolve_method", "rows_of", "run_here", "run_jobs"]

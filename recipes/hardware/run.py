@@ -108,7 +108,8 @@ def main(cfg) -> None:
 
     robots, options = check(cfg)
     results = studies.run_jobs(jobs(cfg, robots, options), address=cfg.ray.address,
-                               cores_per_job=cfg.ray.cores_per_job, fetch_run_dirs=cfg.ray.fetch_run_dirs)
+                               cores_per_job=cfg.ray.cores_per_job, fetch_run_dirs=cfg.ray.fetch_run_dirs,
+                               records=cfg.records)
     rows = studies.rows_of(results)
     out = Path(cfg.out_dir)
     if rows:

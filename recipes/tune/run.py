@@ -100,7 +100,7 @@ def main(cfg) -> None:
 
     robots = check(cfg)
     results = studies.run_jobs(jobs(cfg, robots), address=cfg.ray.address, cores_per_job=cfg.ray.cores_per_job,
-                               fetch_run_dirs=cfg.ray.fetch_run_dirs)
+                               fetch_run_dirs=cfg.ray.fetch_run_dirs, records=cfg.records)
     rows = studies.rows_of(results)
     out = Path(cfg.out_dir)
     if rows:

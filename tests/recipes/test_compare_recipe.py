@@ -25,7 +25,8 @@ def compare(cwd, *overrides):
 def test_compare_through_ray_equals_the_jobs_one_by_one(tmp_path):
     by_ray = tmp_path / "ray"
     by_ray.mkdir()
-    result = compare(by_ray, f"out_dir={by_ray / 'out'}")
+    records = tmp_path / "records"
+    result = compare(by_ray, f"out_dir={by_ray / 'out'}", f"records={records}")
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
     assert "study: 4 jobs, 0 reused" in result.stdout and "study: 4 done, 0 running, 0 failed" in result.stdout
 
@@ -64,10 +65,42 @@ def test_compare_through_ray_equals_the_jobs_one_by_one(tmp_path):
     stages, _ = job_compute(str(by_ray / "outputs" / "ik" / "tiny" / "a1_seed0"))
     assert "dynamics_data_normal" in stages and all(v is not None and v > 0 for v in stages.values()), stages
 
-    # a finished job is reused only while every stage its recipe plans today has the key on disk: a stage made
-    # with another config (as after a changed default) makes it run again, and the run names that stage
+    # the study left a record of every job: its rows, stage keys and timings, without the artifacts; on a machine
+    # without the run directories (another session, a cluster without shared storage) the study takes every job from
+    # its record and writes the same table
+    record = records / "ik" / "tiny" / "a1_seed1"
+    assert {"job.json", "episodes.csv", "results.csv", "report.json", "builds.json",
+            "dynamics_model_normal.pt.key.json"} <= {p.name for p in record.iterdir()}
+    assert not list(records.rglob("*.pt")) and not list(records.rglob("*.npz"))
+    assert sum(p.stat().st_size for p in record.iterdir()) < 200_000
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    moved = compare(elsewhere, f"out_dir={elsewhere / 'out'}", f"records={records}")
+    assert moved.returncode == 0, moved.stdout[-2000:] + moved.stderr[-2000:]
+    assert "study: 4 jobs, 0 reused from their run directories, 4 from their records" in moved.stdout, moved.stdout
+    assert not (elsewhere / "outputs").exists()
+    assert comparable(read_csv(elsewhere / "out" / "comparison.csv")) == comparable(through_ray)
+    moved_wallclock = (elsewhere / "out" / "wallclock.md").read_text()
+    assert moved_wallclock.count("| 0 | from its record |") == 4 and "| ik | a1 | 2 |" in moved_wallclock, \
+        moved_wallclock
+    # a record is taken only while its keys are today's: a stage key that differs makes its job run again here,
+    # and the job's new record replaces the stale one
     import json
 
+    key_path = record / "dynamics_model_normal.pt.key.json"
+    fresh_key = key_path.read_text()
+    changed = json.loads(fresh_key)
+    changed["params"]["lr"] = 2 * changed["params"]["lr"]
+    key_path.write_text(json.dumps(changed))
+    rerun = compare(elsewhere, f"out_dir={elsewhere / 'out'}", f"records={records}")
+    assert rerun.returncode == 0, rerun.stdout[-2000:] + rerun.stderr[-2000:]
+    assert "study: 4 jobs, 0 reused from their run directories, 3 from their records" in rerun.stdout, rerun.stdout
+    assert (elsewhere / "outputs" / "ik" / "tiny" / "a1_seed1" / "job.json").exists()
+    assert key_path.read_text() == fresh_key
+    assert comparable(read_csv(elsewhere / "out" / "comparison.csv")) == comparable(through_ray)
+
+    # a finished job is reused only while every stage its recipe plans today has the key on disk: a stage made
+    # with another config (as after a changed default) makes it run again, and the run names that stage
     from recipes.common.studies import Job, finished
 
     run_dir = by_ray / "outputs" / "ik" / "tiny" / "a1_seed1"
