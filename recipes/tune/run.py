@@ -2,12 +2,15 @@
 targets), as jobs on Ray, so that the comparison runs each baseline at its best without looking at its test targets.
 
     python recipes/tune/run.py                              # IK: integral vs the paper's plain footstep law
+    python recipes/tune/run.py target=sac seeds=[1]         # SAC: the paper's lr 1e-3 vs 3e-4
     python recipes/tune/run.py robots=[daisy] seeds=[0] 'candidates={a: {overrides: []}, b: {overrides: [...]}}'
 
 Every candidate runs the method's recipe in the normal setting with every task replaced by its training split
 (``eval.tasks.<task>.split=train``), in ``out_dir/<candidate>/<robot>_seed<seed>``; a candidate with ``reuse``
-starts from the finished stages ``reuse_stages`` of ``outputs/<reuse>/<preset>/<robot>_seed<seed>`` (their keys are
-checked like any cached stage). Writes ``tune.csv``, ``tune.md`` (per robot and candidate: the training-split cost
+starts from the finished stages ``reuse_stages`` (the candidate's own, else the study's) of
+``outputs/<reuse>/<preset>/<robot>_seed<seed>`` (their keys are checked like any cached stage).
+What is tuned is a ``target`` (``target/<name>.yaml``): ``ik`` (default) or ``sac`` (the paper's optimiser against a
+lower learning rate). Writes ``tune.csv``, ``tune.md`` (per robot and candidate: the training-split cost
 of every task and their mean, the best candidate marked) and ``wallclock.md`` in ``out_dir``.
 """
 
@@ -37,9 +40,9 @@ def check(cfg) -> list:
     if not cfg.candidates:
         problems.append("candidates is empty")
     for name, candidate in (cfg.candidates or {}).items():
-        unknown = set(candidate) - {"overrides", "reuse"}
+        unknown = set(candidate) - {"overrides", "reuse", "reuse_stages"}
         if unknown:
-            problems.append(f"candidate {name!r}: unknown keys {sorted(unknown)} (overrides, reuse)")
+            problems.append(f"candidate {name!r}: unknown keys {sorted(unknown)} (overrides, reuse, reuse_stages)")
     for robot in cfg.robots:
         try:
             robots.append(get_robot(robot))
@@ -67,8 +70,9 @@ def jobs(cfg, robots) -> list:
                 overrides = [f"preset={cfg.preset_name}", f"robot={spec.reference}", f"seed={seed}",
                              "settings=[normal]", "progress=false", *only, *split, *cfg.overrides,
                              *candidate.get("overrides", [])]
+                reuse_stages = candidate.get("reuse_stages", cfg.reuse_stages)
                 planned.append(studies.Job(cfg.method, str(run_dir), overrides, labels={"candidate": name},
-                                           reuse_from=source, reuse_stages=tuple(cfg.reuse_stages)))
+                                           reuse_from=source, reuse_stages=tuple(reuse_stages)))
     return planned
 
 

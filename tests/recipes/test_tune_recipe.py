@@ -35,3 +35,36 @@ def test_tune_ik_tiny(tmp_path):
     lines = [line for line in table.splitlines() if line.startswith("| a1 |")]
     assert len(lines) == 2 and sum(line.endswith("| best |") for line in lines) == 1, table
     assert "Best: a1: " in table
+
+
+def test_tune_sac_tiny_reuses_the_comparison_agents_for_the_paper_candidate(tmp_path):
+    env = {**os.environ, "WANDB_MODE": "offline"}
+    source = tmp_path / "outputs" / "sac" / "tiny" / "a1_seed0"  # the comparison's SAC run
+    done = subprocess.run([sys.executable, str(ROOT / "recipes" / "sac" / "train.py"), "preset=tiny", "seed=0",
+                           f"run_dir={source}", *SMALL], cwd=tmp_path, env=env, capture_output=True, text=True,
+                          timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    out = tmp_path / "out"
+    result = subprocess.run([sys.executable, str(ROOT / "recipes" / "tune" / "run.py"), "target=sac", "preset=tiny",
+                             "robots=[a1]", "seeds=[0]", f"out_dir={out}"], cwd=tmp_path, env=env,
+                            capture_output=True, text=True, timeout=900)
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    rows = read_csv(out / "tune.csv")
+    assert {r["candidate"] for r in rows} == {"paper", "lr_3e-4"}
+    assert {r["task"] for r in rows} == {"velocity_tracking_train", "goal_reaching_train", "trajectory_tracking_train"}
+    # the agents are trained on the training split whatever split is evaluated: the paper candidate's agents are the
+    # comparison run's (their keys match, nothing is retrained), the other candidate trains its own
+    import json
+
+    for task in ("velocity_tracking", "goal_reaching", "trajectory_tracking"):
+        agent = f"sac_{task}.pt"
+        assert (out / "paper" / "a1_seed0" / agent).read_bytes() == (source / agent).read_bytes()
+        assert (out / "lr_3e-4" / "a1_seed0" / agent).read_bytes() != (source / agent).read_bytes()
+    built = json.loads((out / "paper" / "a1_seed0" / "builds.json").read_text())
+    assert not any(name.startswith("sac_") for name in built), built
+    # evaluated on the half of the targets the agents were trained on (not a half of that half)
+    test_goals = len([r for r in read_csv(source / "episodes.csv") if r["task"] == "goal_reaching"])
+    for candidate in ("paper", "lr_3e-4"):
+        train_goals = [r for r in rows if r["candidate"] == candidate and r["task"] == "goal_reaching_train"]
+        assert len(train_goals) == (test_goals + 1) // 2
+    assert "Tuning SAC" in (out / "tune.md").read_text()
