@@ -12,13 +12,19 @@ ROOT = Path(__file__).resolve().parents[2]
 SMALL = ["eval.generalization=null", "eval.videos=[]", "eval.figures=false", "progress=false"]
 
 
-def test_tune_ik_tiny(tmp_path):
-    env = {**os.environ, "WANDB_MODE": "offline"}
-    source = tmp_path / "outputs" / "ik" / "tiny" / "a1_seed0"  # a finished IK run the integral candidate reuses
-    done = subprocess.run([sys.executable, str(ROOT / "recipes" / "ik" / "train.py"), "preset=tiny", "seed=0",
+def finished_run(tmp_path: Path, method: str, env: dict) -> Path:
+    """A finished tiny run of ``method`` on A1, seed 0, where the comparison would have it."""
+    source = tmp_path / "outputs" / method / "tiny" / "a1_seed0"
+    done = subprocess.run([sys.executable, str(ROOT / "recipes" / method / "train.py"), "preset=tiny", "seed=0",
                            f"run_dir={source}", *SMALL], cwd=tmp_path, env=env, capture_output=True, text=True,
                           timeout=600)
     assert done.returncode == 0, done.stderr[-2000:]
+    return source
+
+
+def test_tune_ik_tiny(tmp_path):
+    env = {**os.environ, "WANDB_MODE": "offline"}
+    source = finished_run(tmp_path, "ik", env)  # a finished IK run the integral candidate reuses
     out = tmp_path / "out"
     result = subprocess.run([sys.executable, str(ROOT / "recipes" / "tune" / "run.py"), "preset=tiny", "robots=[a1]",
                              "seeds=[0]", f"out_dir={out}"], cwd=tmp_path, env=env, capture_output=True, text=True,
@@ -39,11 +45,7 @@ def test_tune_ik_tiny(tmp_path):
 
 def test_tune_sac_tiny_reuses_the_comparison_agents_for_the_paper_candidate(tmp_path):
     env = {**os.environ, "WANDB_MODE": "offline"}
-    source = tmp_path / "outputs" / "sac" / "tiny" / "a1_seed0"  # the comparison's SAC run
-    done = subprocess.run([sys.executable, str(ROOT / "recipes" / "sac" / "train.py"), "preset=tiny", "seed=0",
-                           f"run_dir={source}", *SMALL], cwd=tmp_path, env=env, capture_output=True, text=True,
-                          timeout=600)
-    assert done.returncode == 0, done.stderr[-2000:]
+    source = finished_run(tmp_path, "sac", env)  # the comparison's SAC run
     out = tmp_path / "out"
     result = subprocess.run([sys.executable, str(ROOT / "recipes" / "tune" / "run.py"), "target=sac", "preset=tiny",
                              "robots=[a1]", "seeds=[0]", f"out_dir={out}"], cwd=tmp_path, env=env,
