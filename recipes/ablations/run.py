@@ -63,7 +63,7 @@ def main(cfg) -> None:
     check(cfg)
     planned = jobs(cfg)
     results = studies.run_jobs(planned, address=cfg.ray.address, cores_per_job=cfg.ray.cores_per_job,
-                               fetch_run_dirs=cfg.ray.fetch_run_dirs, records=cfg.records)
+                               fetch_run_dirs=cfg.ray.fetch_run_dirs, records=cfg.records, dry_run=cfg.dry_run)
     rows = studies.rows_of(results)
     out = Path(cfg.out_dir)
     if rows:

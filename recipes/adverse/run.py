@@ -154,7 +154,7 @@ def low_level_checks(results) -> str:
 
 def run(cfg, jobs) -> list:
     return studies.run_jobs(jobs, address=cfg.ray.address, cores_per_job=cfg.ray.cores_per_job,
-                            fetch_run_dirs=cfg.ray.fetch_run_dirs, records=cfg.records)
+                            fetch_run_dirs=cfg.ray.fetch_run_dirs, records=cfg.records, dry_run=cfg.dry_run)
 
 
 @recipe_main(__file__)

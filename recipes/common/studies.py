@@ -231,12 +231,50 @@ def _keep_record(records: str | None, job: Job, record: dict | None) -> None:
         job_records.save(record, job_records.record_dir(records, job.run_dir))
 
 
+def plan_text(jobs: Sequence[Job], done: dict[int, JobResult], slots: int | None) -> str:
+    """The study's plan: every job's state (finished here, from its record, to run) and the compute each job to run
+    will take, estimated as the mean compute of the finished jobs of the same method and robot (their stages'
+    recorded build times), with the total and what it is on ``slots`` jobs at once (``None``: a cluster, not said)."""
+    from recipes.common.report import job_compute
+
+    def group(job: Job) -> tuple[str, str]:
+        return job.labels.get("method", job.method), Path(job.run_dir).name.rsplit("_seed", 1)[0]
+
+    known: dict[tuple[str, str], list[float]] = {}
+    for result in done.values():
+        stages, _ = job_compute(result.source)
+        if stages and all(v is not None for v in stages.values()):
+            known.setdefault(group(result.job), []).append(sum(stages.values()) / 60)
+    lines = ["| method | run directory | state | compute (min) |", "|---|---|---|---|"]
+    todo_minutes, unknown = 0.0, 0
+    for index, job in enumerate(jobs):
+        method, _ = group(job)
+        if index in done:
+            state = "finished here" if done[index].source == job.run_dir else f"from its record ({done[index].source})"
+            lines.append(f"| {method} | {job.run_dir} | {state} | |")
+            continue
+        estimate = known.get(group(job))
+        if estimate:
+            todo_minutes += sum(estimate) / len(estimate)
+        else:
+            unknown += 1
+        cell = f"about {sum(estimate) / len(estimate):.0f}" if estimate else "?"
+        lines.append(f"| {method} | {job.run_dir} | to run | {cell} |")
+    left = len(jobs) - len(done)
+    summary = (f"study plan: {len(jobs)} jobs, {len(done)} finished, {left} to run: about {todo_minutes:.0f} min of "
+               "compute" + (f", about {todo_minutes / slots:.0f} min on {slots} at once" if slots else ""))
+    if unknown:
+        summary += f" ({unknown} without an estimate: no finished job of the same method and robot)"
+    return "\n".join([summary, "", *lines]) + "\n"
+
+
 def run_jobs(jobs: Sequence[Job], *, address: str | None = None, cores_per_job: int | None = None,
-             fetch_run_dirs: bool = False, records: str | None = None,
+             fetch_run_dirs: bool = False, records: str | None = None, dry_run: bool = False,
              progress_every: float = 30.0) -> list[JobResult]:
     """Runs ``jobs`` through Ray (see the module docstring) and returns one :class:`JobResult` per job, in order.
     With ``records`` (a directory), every finished job leaves its record there and a job missing from its run
-    directory is taken from its current record (``recipes/common/records.py``)."""
+    directory is taken from its current record (``recipes/common/records.py``). With ``dry_run``, prints the plan
+    (:func:`plan_text`) and ends the study (``SystemExit(0)``) without running or writing anything."""
     import ray
 
     check_records(records)
@@ -251,13 +289,18 @@ def run_jobs(jobs: Sequence[Job], *, address: str | None = None, cores_per_job: 
             job.cores = int(cores_per_job)
         if finished(job):
             results[index] = JobResult(job, True, read_csv(Path(job.run_dir) / "episodes.csv"), 0.0, reused=True)
-            _keep_record(records, job, job_records.files_of(job.run_dir))
+            if not dry_run:
+                _keep_record(records, job, job_records.files_of(job.run_dir))
         elif records and not (Path(job.run_dir) / DONE).exists() and recorded(job, records):
             source = job_records.record_dir(records, job.run_dir)
             results[index] = JobResult(job, True, job_records.rows(source), 0.0, reused=True, source=str(source))
             from_records += 1
         else:
             todo.append(index)
+    if dry_run:
+        cores = max(1, jobs[0].cores) if jobs else 1
+        print(plan_text(jobs, results, slots=None if address else max(1, _available_cores() // cores)), flush=True)
+        raise SystemExit(0)
     line = f"study: {len(jobs)} jobs, {len(jobs) - len(todo) - from_records} reused from their run directories"
     print(line + (f", {from_records} from their records in {records}" if records else ""), flush=True)
     if todo:
@@ -337,5 +380,5 @@ def run_here(job: Job) -> list[dict]:
     return outcome["rows"]
 
 
-__all__ = ["DONE", "METHODS", "Job", "JobResult", "check_records", "execute", "finished", "planned_stages", "recorded",
-           "report_failures", "resolve_method", "rows_of", "run_here", "run_jobs"]
+__all__ = ["DONE", "METHODS", "Job", "JobResult", "check_records", "execute", "finished", "plan_text", "planned_stages",
+           "recorded", "report_failures", "resolve_method", "rows_of", "run_here", "run_jobs"]

@@ -100,7 +100,7 @@ def jobs(cfg, robots) -> list:
 def main(cfg) -> None:
     robots = check(cfg)
     results = studies.run_jobs(jobs(cfg, robots), address=cfg.ray.address, cores_per_job=cfg.ray.cores_per_job,
-                               fetch_run_dirs=cfg.ray.fetch_run_dirs, records=cfg.records)
+                               fetch_run_dirs=cfg.ray.fetch_run_dirs, records=cfg.records, dry_run=cfg.dry_run)
     rows = studies.rows_of(results)
     if rows:
         table = write_study_tables(rows, results, Path(cfg.out_dir), name="comparison", settings=cfg.settings,

@@ -75,6 +75,10 @@ def test_compare_through_ray_equals_the_jobs_one_by_one(tmp_path):
     assert sum(p.stat().st_size for p in record.iterdir()) < 200_000
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
+    planned = compare(elsewhere, f"out_dir={elsewhere / 'out'}", f"records={records}", "dry_run=true")
+    assert planned.returncode == 0, planned.stdout[-2000:] + planned.stderr[-2000:]
+    assert "study plan: 4 jobs, 4 finished, 0 to run" in planned.stdout, planned.stdout
+    assert planned.stdout.count("| from its record (") == 4 and not (elsewhere / "out").exists()
     moved = compare(elsewhere, f"out_dir={elsewhere / 'out'}", f"records={records}")
     assert moved.returncode == 0, moved.stdout[-2000:] + moved.stderr[-2000:]
     assert "study: 4 jobs, 0 reused from their run directories, 4 from their records" in moved.stdout, moved.stdout
@@ -92,6 +96,11 @@ def test_compare_through_ray_equals_the_jobs_one_by_one(tmp_path):
     changed = json.loads(fresh_key)
     changed["params"]["lr"] = 2 * changed["params"]["lr"]
     key_path.write_text(json.dumps(changed))
+    planned = compare(elsewhere, f"out_dir={elsewhere / 'out'}", f"records={records}", "dry_run=true")
+    assert "study plan: 4 jobs, 3 finished, 1 to run: about" in planned.stdout, planned.stdout
+    to_run = [line for line in planned.stdout.splitlines() if "| to run |" in line]
+    assert len(to_run) == 1 and "ik/tiny/a1_seed1" in to_run[0] and "| about " in to_run[0], planned.stdout
+    assert not (elsewhere / "outputs").exists()  # a dry run runs nothing
     rerun = compare(elsewhere, f"out_dir={elsewhere / 'out'}", f"records={records}")
     assert rerun.returncode == 0, rerun.stdout[-2000:] + rerun.stderr[-2000:]
     assert "study: 4 jobs, 0 reused from their run directories, 3 from their records" in rerun.stdout, rerun.stdout
