@@ -233,18 +233,30 @@ def _keep_record(records: str | None, job: Job, record: dict | None) -> None:
 
 def plan_text(jobs: Sequence[Job], done: dict[int, JobResult], slots: int | None) -> str:
     """The study's plan: every job's state (finished here, from its record, to run) and the compute each job to run
-    will take, estimated as the mean compute of the finished jobs of the same method and robot (their stages'
-    recorded build times), with the total and what it is on ``slots`` jobs at once (``None``: a cluster, not said)."""
+    will take: over the stages its recipe plans that are not finished yet (in its run directory, or among the stages
+    it reuses), the mean recorded build time of the same stage in the finished jobs of the same method and robot.
+    Then the total, and what it is on ``slots`` jobs at once (``None``: a cluster, not said)."""
+    from hierloco.runs import RunDirectory
     from recipes.common.report import job_compute
 
     def group(job: Job) -> tuple[str, str]:
         return job.labels.get("method", job.method), Path(job.run_dir).name.rsplit("_seed", 1)[0]
 
-    known: dict[tuple[str, str], list[float]] = {}
+    def finished_stages(directory: str | None, specs, names=None) -> set:
+        if not directory or not Path(directory).is_dir():
+            return set()
+        wanted = [spec for spec in specs if names is None or spec.name in names]
+        try:
+            return {name for name, ok in RunDirectory(directory, readonly=False).verify(wanted).items() if ok}
+        except Exception:  # noqa: BLE001  (a stage made with another config: it will be built, and the run says so)
+            return set()
+
+    known: dict[tuple, list[float]] = {}
     for result in done.values():
         stages, _ = job_compute(result.source)
-        if stages and all(v is not None for v in stages.values()):
-            known.setdefault(group(result.job), []).append(sum(stages.values()) / 60)
+        for name, seconds in stages.items():
+            if seconds is not None:
+                known.setdefault((*group(result.job), name), []).append(seconds / 60)
     lines = ["| method | run directory | state | compute (min) |", "|---|---|---|---|"]
     todo_minutes, unknown = 0.0, 0
     for index, job in enumerate(jobs):
@@ -253,18 +265,30 @@ def plan_text(jobs: Sequence[Job], done: dict[int, JobResult], slots: int | None
             state = "finished here" if done[index].source == job.run_dir else f"from its record ({done[index].source})"
             lines.append(f"| {method} | {job.run_dir} | {state} | |")
             continue
-        estimate = known.get(group(job))
-        if estimate:
-            todo_minutes += sum(estimate) / len(estimate)
-        else:
+        try:
+            specs = planned_stages(job)
+        except Exception:  # noqa: BLE001  (a config problem: the job reports it when it runs)
+            specs = None
+        minutes = None
+        if specs is not None:
+            have = finished_stages(job.run_dir, specs) | finished_stages(job.reuse_from, specs, job.reuse_stages)
+            times = [known.get((*group(job), spec.name)) for spec in specs if spec.name not in have]
+            if all(times):
+                minutes = sum(sum(t) / len(t) for t in times)
+        if minutes is None:
             unknown += 1
-        cell = f"about {sum(estimate) / len(estimate):.0f}" if estimate else "?"
+        else:
+            todo_minutes += minutes
+        cell = f"about {minutes:.0f}" if minutes is not None else "?"
         lines.append(f"| {method} | {job.run_dir} | to run | {cell} |")
     left = len(jobs) - len(done)
-    summary = (f"study plan: {len(jobs)} jobs, {len(done)} finished, {left} to run: about {todo_minutes:.0f} min of "
-               "compute" + (f", about {todo_minutes / slots:.0f} min on {slots} at once" if slots else ""))
+    summary = f"study plan: {len(jobs)} jobs, {len(done)} finished, {left} to run"
+    if left > unknown:
+        summary += (f": about {todo_minutes:.0f} min of compute" + (f" for {left - unknown} of them" if unknown else "")
+                    + (f", about {todo_minutes / slots:.0f} min on {slots} at once" if slots else ""))
     if unknown:
-        summary += f" ({unknown} without an estimate: no finished job of the same method and robot)"
+        summary += (f"; {unknown} without an estimate (a stage that no finished job of the same method and robot "
+                    "has built)")
     return "\n".join([summary, "", *lines]) + "\n"
 
 
