@@ -79,15 +79,24 @@ def save(record: dict[str, str], directory: str | os.PathLike) -> bool:
     return changed
 
 
+def holds_job(directory: str | os.PathLike, signature: dict) -> bool:
+    """Whether ``directory`` (a run directory or a record) holds a finished job (``job.json`` and ``episodes.csv``)
+    with this ``signature`` (method and overrides)."""
+    directory = Path(directory)
+    try:
+        return ((directory / "episodes.csv").is_file()
+                and json.loads((directory / "job.json").read_text()).get("signature") == signature)
+    except (OSError, ValueError):
+        return False
+
+
 def current(directory: str | os.PathLike, signature: dict, specs: Iterable[StageSpec]) -> bool:
     """Whether the record in ``directory`` is of a job with this ``signature`` (method and overrides) and holds,
     for every stage of today's plan ``specs``, the same key."""
     directory = Path(directory)
+    if not holds_job(directory, signature):
+        return False
     try:
-        if json.loads((directory / "job.json").read_text()).get("signature") != signature:
-            return False
-        if not (directory / "episodes.csv").is_file():
-            return False
         for spec in specs:
             stored = json.loads((directory / f"{spec.filename}.key.json").read_text())
             if stored != normalized(spec.key):
@@ -102,4 +111,4 @@ def rows(directory: str | os.PathLike) -> list[dict]:
     return read_csv(Path(directory) / "episodes.csv")
 
 
-__all__ = ["FILES", "current", "files_of", "record_dir", "rows", "save"]
+__all__ = ["FILES", "current", "files_of", "holds_job", "record_dir", "rows", "save"]

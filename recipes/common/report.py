@@ -165,7 +165,7 @@ def wallclock_markdown(results) -> str:
              "|---|---|---|---|---|---|---|"]
     per_method: dict[tuple[str, str], list[float]] = {}
     for result in results:
-        source = getattr(result, "source", "") or result.job.run_dir  # the run directory, or the job's record
+        source = result.source  # the run directory, or the job's record
         seconds = result.seconds if not result.reused else _recorded_seconds(source)
         method = result.job.labels.get("method", result.job.method)
         stages, builds = job_compute(source)

@@ -95,15 +95,7 @@ def finished(job: Job) -> bool:
     """Whether ``job`` already finished in its run directory with the same method and overrides, and every stage
     its recipe plans today is there with the key it has today (a changed default or code path that enters a key
     makes the job run again, and the run then names the stage that changed)."""
-    marker = Path(job.run_dir) / DONE
-    if not marker.exists() or not (Path(job.run_dir) / "episodes.csv").exists():
-        return False
-    try:
-        if json.loads(marker.read_text()).get("signature") != job.signature():
-            return False
-    except (OSError, json.JSONDecodeError):
-        return False
-    return stages_current(job)
+    return job_records.holds_job(job.run_dir, job.signature()) and stages_current(job)
 
 
 def planned_stages(job: Job) -> list:
@@ -132,7 +124,7 @@ def stages_current(job: Job) -> bool:
 def recorded(job: Job, records: str) -> bool:
     """Whether the job's record under ``records`` is of this job (method, overrides) with today's stage keys."""
     directory = job_records.record_dir(records, job.run_dir)
-    if not (directory / DONE).is_file():
+    if not job_records.holds_job(directory, job.signature()):
         return False
     try:
         specs = planned_stages(job)
