@@ -4,7 +4,8 @@ dynamics samples) over several trials, as jobs on Ray, then tabulate and plot.
     python recipes/ablations/run.py                    # Daisy, paper scale, 10 trials per value
     python recipes/ablations/run.py trials=3 preset=small robot=a1 run=[latent_dim]
 
-Every trial is a LAT run in ``out_dir/<ablation>_<value>/seed<trial>`` (finished runs are reused). Writes
+Every trial is a LAT run in ``out_dir/<ablation>_<value>/seed<trial>``, or, at the preset's own value, the trial's
+default run ``out_dir/default/seed<trial>`` that every ablation shares (finished runs are reused). Writes
 ``ablations.csv``, ``ablations.md``, ``wallclock.md`` and ``ablations.png`` in ``out_dir``.
 """
 
@@ -41,31 +42,54 @@ def check(cfg) -> None:
         raise ConfigError("bad config: " + "; ".join(problems))
 
 
-def jobs(cfg) -> list:
+def jobs(cfg) -> tuple[list, list]:
+    """The study's jobs, and each trial as ``(labels, job index)``. A value that is the preset's own (at paper scale
+    latent dimension 3, 50 experts) gives the same run whichever ablation varies it: one default run per trial, in
+    ``out_dir/default/seed<trial>``, serves them all. Every other trial starts from the stages it shares with the
+    default run of its trial (a dynamics-sample trial: the whole low level, so only the dynamics differ)."""
+    from omegaconf import OmegaConf
+
     from hierloco.envs.robots import robot_reference
+    from recipes.common.config import compose_recipe
 
     robot = robot_reference(cfg.robot)  # a YAML robot as an absolute path: every worker finds it
-    planned = []
+    common = [f"preset={cfg.preset_name}", f"robot={robot}", "progress=false", *cfg.overrides]
+    defaults = compose_recipe("lat", common)
+    planned, trials, default_jobs = [], [], {}
+
+    def default_job(trial: int) -> int:
+        if trial not in default_jobs:
+            default_jobs[trial] = len(planned)
+            planned.append(studies.Job("lat", str(Path(cfg.out_dir) / "default" / f"seed{trial}"),
+                                       [*common, f"seed={trial}"], labels={"method": "default"}))
+        return default_jobs[trial]
+
     for name in cfg.run:
         spec = cfg.ablations[name]
         for value in spec["values"]:
             for trial in range(cfg.trials):
-                run_dir = Path(cfg.out_dir) / f"{name}_{value}" / f"seed{trial}"
-                overrides = [f"preset={cfg.preset_name}", f"robot={robot}", f"seed={trial}", f"{spec['key']}={value}",
-                             "progress=false", *cfg.overrides]
-                planned.append(studies.Job("lat", str(run_dir), overrides,
-                                           labels={"method": f"{name}={value}", "ablation": name, "value": value}))
-    return planned
+                labels = {"method": f"{name}={value}", "ablation": name, "value": value}
+                if value == OmegaConf.select(defaults, spec["key"]):
+                    trials.append((labels, default_job(trial)))
+                    continue
+                trials.append((labels, len(planned)))
+                planned.append(studies.Job("lat", str(Path(cfg.out_dir) / f"{name}_{value}" / f"seed{trial}"),
+                                           [*common, f"seed={trial}", f"{spec['key']}={value}"], labels=labels,
+                                           reuse_from=planned[default_job(trial)].run_dir))
+    return planned, trials
 
 
 @recipe_main(__file__)
 def main(cfg) -> None:
+    from recipes.common.report import wallclock_markdown
+
     check(cfg)
-    planned = jobs(cfg)
+    planned, trials = jobs(cfg)
     results = studies.run_jobs(planned, address=cfg.ray.address, cores_per_job=cfg.ray.cores_per_job,
                                fetch_run_dirs=cfg.ray.fetch_run_dirs, records=cfg.records, dry_run=cfg.dry_run)
-    rows = studies.rows_of(results)
+    rows = [{**row, **labels} for labels, index in trials if results[index].ok for row in results[index].rows]
     out = Path(cfg.out_dir)
+    write_text(out / "wallclock.md", wallclock_markdown(results))
     if rows:
         per_value: dict = {}
         for row in rows:

@@ -27,9 +27,6 @@ from recipes.common import studies
 from recipes.common.config import ConfigError, SETTINGS, as_lists
 from recipes.common.entry import recipe_main
 
-TRAINING = ("experts", "gait_policy", "gait_policy_check")  # LAT's low level, reused by the few-sample runs
-
-
 def check(cfg) -> list:
     from hierloco.envs.robots import get_robot
     from hierloco.envs.robots.profiles import PROFILES
@@ -73,7 +70,8 @@ PAPER_SETTINGS = ("normal", "legs_disabled")  # run together, in the run directo
 
 def fault_jobs(cfg, robots) -> tuple[list, list]:
     """The runs of the paper's settings (one run directory per method, robot, profile and seed), and one job per
-    other fault, starting from the first's trained low level (so a fault nothing can be learned in fails alone)."""
+    other fault, starting from the first's finished stages that it shares (its trained low level), so a fault
+    nothing can be learned in fails alone."""
     main, extra = [], []
     for robot, spec in zip(cfg.robots, robots):
         for method in cfg.methods:
@@ -91,11 +89,14 @@ def fault_jobs(cfg, robots) -> tuple[list, list]:
                                             labels=labels))
                     for fault in (s for s in settings if s not in paper):
                         extra.append(studies.Job(recipe, f"{home}_{fault}", [*common, f"settings=[{fault}]"],
-                                                 labels=labels, reuse_from=str(home), reuse_stages=TRAINING))
+                                                 labels=labels, reuse_from=str(home)))
     return main, extra
 
 
 def sample_jobs(cfg, robots) -> list:
+    """One job per method, robot, seed and sample count: the dynamics re-learned with the rear legs locked from that
+    many transitions, starting from the stages it shares with the method's run of the paper's settings (the trained
+    low level; at that run's own count, its dynamics and evaluations too)."""
     jobs = []
     for robot, spec in zip(cfg.robots, robots):
         for method in cfg.sample_methods:
@@ -109,7 +110,7 @@ def sample_jobs(cfg, robots) -> list:
                                  "eval.videos=[]", *variant, *cfg.overrides, *cfg.method_overrides.get(method, [])]
                     jobs.append(studies.Job(recipe, str(target), overrides, labels={"method": method,
                                                                                     "samples": count},
-                                            reuse_from=str(source), reuse_stages=TRAINING))
+                                            reuse_from=str(source)))
     return jobs
 
 
@@ -159,14 +160,17 @@ def run(cfg, jobs) -> list:
 
 @recipe_main(__file__)
 def main(cfg) -> None:
+    from recipes.common.report import wallclock_markdown
+
     robots = check(cfg)
     main_jobs, extra_jobs = fault_jobs(cfg, robots)
     samples = sample_jobs(cfg, robots)
     out = Path(cfg.out_dir)
-    results = run(cfg, main_jobs)
-    later = run(cfg, extra_jobs + samples) if extra_jobs or samples else []  # from the trained low levels
-    fault_results, sample_results = results + later[: len(extra_jobs)], later[len(extra_jobs):]
+    results = run(cfg, main_jobs + extra_jobs + samples)  # a job starting from another's stages waits for it
+    faults = len(main_jobs) + len(extra_jobs)
+    fault_results, sample_results = results[:faults], results[faults:]
     failed = studies.report_failures(fault_results + sample_results)
+    write_text(out / "wallclock.md", wallclock_markdown(results))
     rows = [{**row, "setting": row["setting"] + ("" if row["profile"] == "own" else f"_{row['profile']}")}
             for row in studies.rows_of(fault_results)]
     unusable = [r for r in fault_results if not r.ok]

@@ -50,8 +50,8 @@ class Job:
     overrides: list[str]
     cores: int = 1
     labels: dict = field(default_factory=dict)  # added to every result row (e.g. the ablation value)
-    reuse_from: str | None = None  # another run directory whose finished stages ``reuse_stages`` this job starts from
-    reuse_stages: tuple = ()
+    reuse_from: str | None = None  # another run directory whose finished stages this job starts from (their keys
+    reuse_stages: tuple = ()       # equal to this job's own): those named here, or every one when it names none
 
     def command(self) -> list[str]:
         return [sys.executable, str(RECIPES / self.method / "train.py"), f"run_dir={self.run_dir}",
@@ -138,7 +138,7 @@ def execute(job: Job, fetch_run_dir: bool = False) -> dict:
     as a tar archive. This is the body of the Ray task."""
     start = time.perf_counter()
     if job.reuse_from:
-        _reuse_stages(Path(job.reuse_from), Path(job.run_dir), job.reuse_stages)
+        _reuse_stages(job)
     env = {**os.environ, "OMP_NUM_THREADS": str(job.cores), "MKL_NUM_THREADS": str(job.cores),
            "WANDB_SILENT": "true"}
     log = Path(job.run_dir).parent / f"{Path(job.run_dir).name}.log"
@@ -181,15 +181,56 @@ def die_with_parent() -> None:
         sys.exit("the study worker that started this run is gone")
 
 
-def _reuse_stages(source: Path, target: Path, stages) -> None:
-    """Copies the finished ``stages`` of run directory ``source`` (artifact and key) that ``target`` lacks; the
-    recipe then checks their keys like any cached stage."""
-    if not source.is_dir():
+def reusable_stages(job: Job, specs=None, source_plan=None) -> list:
+    """The stages of the job's plan (``specs``, else planned now) that it can start from: those ``job.reuse_from``
+    holds finished with the key this job plans, of those ``job.reuse_stages`` names (of all when it names none). A
+    stage made with another config is never taken, so a job may name a source that shares only its first stages.
+    ``source_plan`` (the source's planned stages) stands for the source when it is a job still to run."""
+    from hierloco.runs import normalized
+
+    if not job.reuse_from:
+        return []
+    if source_plan is not None:
+        key_in_source = {spec.filename: normalized(spec.key) for spec in source_plan}.get
+    else:
+        key_in_source = lambda filename: _finished_key(Path(job.reuse_from), filename)  # noqa: E731
+    return [spec for spec in (planned_stages(job) if specs is None else specs)
+            if (not job.reuse_stages or spec.name in job.reuse_stages)
+            and key_in_source(spec.filename) == normalized(spec.key)]
+
+
+def _finished_key(directory: Path, filename: str) -> dict | None:
+    """The key of the finished stage whose artifact is ``filename`` in run directory ``directory`` (None: none)."""
+    try:
+        return json.loads((directory / f"{filename}.key.json").read_text()) if (directory / filename).is_file() else None
+    except (OSError, ValueError):
+        return None
+
+
+def _reuse_stages(job: Job) -> None:
+    """Copies into the job's run directory the stages it can start from (:func:`reusable_stages`) that it lacks,
+    each key before its artifact and the artifact atomically: a copy cut short leaves a stage to build, never a
+    stage without its key."""
+    from hierloco.io import atomic_path
+    from hierloco.runs import BUILDS_NAME, RunDirectory
+
+    try:
+        specs = reusable_stages(job)
+    except Exception:  # noqa: BLE001  (a config problem: the job reports it when it runs)
         return
-    target.mkdir(parents=True, exist_ok=True)
-    for path in source.iterdir():
-        if path.is_file() and path.name.split(".")[0] in stages and not (target / path.name).exists():
-            shutil.copyfile(path, target / path.name)
+    source, target = RunDirectory(job.reuse_from, readonly=True), Path(job.run_dir)
+    built, copied = source.builds(), {}
+    for spec in specs:
+        if (target / spec.filename).exists():
+            continue
+        for name in (f"{spec.filename}.key.json", spec.filename):
+            with atomic_path(target / name) as tmp:
+                shutil.copyfile(source.path / name, tmp)
+        if spec.name in built:  # what building it took, so the job's compute still counts it
+            copied[spec.name] = {**built[spec.name], "copied_from": str(source.path)}
+    if copied:
+        builds = RunDirectory(target, readonly=True).builds()
+        write_text(target / BUILDS_NAME, json.dumps({**builds, **copied}, indent=1, sort_keys=True))
 
 
 def _progress(done: int, running: int, failed: int, pending: int, start: float, durations: list[float],
@@ -234,12 +275,11 @@ def plan_text(jobs: Sequence[Job], done: dict[int, JobResult], slots: int | None
     def group(job: Job) -> tuple[str, str]:
         return job.labels.get("method", job.method), Path(job.run_dir).name.rsplit("_seed", 1)[0]
 
-    def finished_stages(directory: str | None, specs, names=None) -> set:
+    def finished_stages(directory: str | None, specs) -> set:
         if not directory or not Path(directory).is_dir():
             return set()
-        wanted = [spec for spec in specs if names is None or spec.name in names]
         try:
-            return {name for name, ok in RunDirectory(directory, readonly=False).verify(wanted).items() if ok}
+            return {name for name, ok in RunDirectory(directory, readonly=False).verify(specs).items() if ok}
         except Exception:  # noqa: BLE001  (a stage made with another config: it will be built, and the run says so)
             return set()
 
@@ -251,6 +291,7 @@ def plan_text(jobs: Sequence[Job], done: dict[int, JobResult], slots: int | None
                 known.setdefault((*group(result.job), name), []).append(seconds / 60)
     lines = ["| method | run directory | state | compute (min) |", "|---|---|---|---|"]
     todo_minutes, unknown = 0.0, 0
+    to_run = {job.run_dir: job for index, job in enumerate(jobs) if index not in done}
     for index, job in enumerate(jobs):
         method, _ = group(job)
         if index in done:
@@ -263,7 +304,13 @@ def plan_text(jobs: Sequence[Job], done: dict[int, JobResult], slots: int | None
             specs = None
         minutes = None
         if specs is not None:
-            have = finished_stages(job.run_dir, specs) | finished_stages(job.reuse_from, specs, job.reuse_stages)
+            source = to_run.get(job.reuse_from)  # a job of this study it starts from, once that has run
+            try:
+                source_plan = planned_stages(source) if source is not None else None
+            except Exception:  # noqa: BLE001
+                source_plan = []
+            have = finished_stages(job.run_dir, specs) | {spec.name for spec in reusable_stages(job, specs,
+                                                                                                  source_plan)}
             times = [known.get((*group(job), spec.name)) for spec in specs if spec.name not in have]
             if all(times):
                 minutes = sum(sum(t) / len(t) for t in times)
@@ -301,6 +348,7 @@ def run_jobs(jobs: Sequence[Job], *, address: str | None = None, cores_per_job: 
     for index, job in enumerate(jobs):
         if not address:  # local workers share this file system: give them absolute paths
             job.run_dir = str(Path(job.run_dir).resolve())
+            job.reuse_from = str(Path(job.reuse_from).resolve()) if job.reuse_from else None
         if cores_per_job is not None:
             job.cores = int(cores_per_job)
         if finished(job):
@@ -330,11 +378,20 @@ def run_jobs(jobs: Sequence[Job], *, address: str | None = None, cores_per_job: 
                 ray.init(num_cpus=_available_cores(), include_dashboard=False, log_to_driver=False,
                          configure_logging=False)
         remote = ray.remote(execute)
-        pending = {remote.options(num_cpus=jobs[i].cores).remote(jobs[i], fetch_run_dirs): i for i in todo}
+        waiting = _waiting(jobs, todo)  # job -> the job of this study it starts from, which must end first
+        pending: dict = {}
+
+        def submit(indices) -> None:
+            pending.update({remote.options(num_cpus=jobs[i].cores).remote(jobs[i], fetch_run_dirs): i for i in indices})
+
+        submit(i for i in todo if i not in waiting)
         slots = max(1, int(ray.cluster_resources().get("CPU", 1)) // max(1, jobs[todo[0]].cores))
         start, last, durations = time.perf_counter(), 0.0, []
         finished_at = start
-        while pending:
+        while pending or waiting:
+            if not pending:  # what is left waits on itself (jobs that name each other): run it as it is
+                submit(list(waiting))
+                waiting.clear()
             ready, _ = ray.wait(list(pending), num_returns=1, timeout=progress_every)
             for ref in ready:
                 index = pending.pop(ref)
@@ -354,15 +411,27 @@ def run_jobs(jobs: Sequence[Job], *, address: str | None = None, cores_per_job: 
                 finished_at = time.perf_counter()
                 if not outcome["ok"]:
                     print(f"study: job {job.method} {job.run_dir} failed: {outcome['error']}", flush=True)
-            if time.perf_counter() - last >= progress_every or not pending:
+                released = [i for i, after in waiting.items() if after == index]
+                for i in released:
+                    del waiting[i]
+                submit(released)
+            if time.perf_counter() - last >= progress_every or not (pending or waiting):
                 failed = sum(not r.ok for r in results.values())
                 running = min(len(pending), slots)
-                print(_progress(len(results) - failed, running, failed, len(pending) - running, start, durations,
-                                slots, finished_at), flush=True)
+                print(_progress(len(results) - failed, running, failed, len(pending) + len(waiting) - running, start,
+                                durations, slots, finished_at), flush=True)
                 last = time.perf_counter()
         if started_here:
             ray.shutdown()
     return [results[i] for i in range(len(jobs))]
+
+
+def _waiting(jobs: Sequence[Job], todo: Sequence[int]) -> dict[int, int]:
+    """The jobs to run that start from another job to run (``reuse_from`` its run directory): job -> that job. They
+    are submitted when it ends, so they start from its finished stages."""
+    to_run = {jobs[i].run_dir: i for i in todo}
+    return {i: to_run[jobs[i].reuse_from] for i in todo
+            if jobs[i].reuse_from in to_run and to_run[jobs[i].reuse_from] != i}
 
 
 def _available_cores() -> int:

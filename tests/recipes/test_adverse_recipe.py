@@ -16,7 +16,8 @@ ROOT = Path(__file__).resolve().parents[2]
 def test_adverse_tiny(tmp_path):
     out = tmp_path / "adverse"
     command = [sys.executable, str(ROOT / "recipes" / "adverse" / "run.py"), "preset=tiny", "robots=[a1]", "seeds=[0]",
-               "methods=[lat]", "profiles=[own]", "faults.own=[normal,rear_limp,one_leg_locked]", "samples=[50]",
+               "methods=[lat]", "profiles=[own]", "faults.own=[normal,legs_disabled,rear_limp,one_leg_locked]",
+               "samples=[50,200]",
                "sample_methods=[lat]", f"out_dir={out}", 'overrides=["eval.generalization=null","eval.figures=false"]',
                '+method_overrides.lat=["checks.min_expert_reach=0.3"]']
     result = subprocess.run(command, cwd=tmp_path, env={**os.environ, "WANDB_MODE": "offline"}, capture_output=True,
@@ -24,7 +25,7 @@ def test_adverse_tiny(tmp_path):
     assert result.returncode == 1, result.stdout[-3000:] + result.stderr[-3000:]
     assert "a1_seed0_rear_limp" in result.stderr and "ended in a fall" in result.stderr
     rows = read_csv(out / "adverse.csv")
-    assert {r["setting"] for r in rows} == {"normal", "one_leg_locked"}
+    assert {r["setting"] for r in rows} == {"normal", "legs_disabled", "one_leg_locked"}
     table = (out / "adverse.md").read_text()
     assert "| lat | a1 | own | one_leg_locked |" in table  # the speeds the fault leaves
     assert "## Runs that could not be evaluated" in table and "limp legs ['RR', 'RL']" in table
@@ -35,10 +36,18 @@ def test_adverse_tiny(tmp_path):
     assert all("checks.min_expert_reach=0.3" in log.read_text() for log in
                [tmp_path / "outputs" / "lat" / "tiny" / "a1_seed0.log", out / "samples" / "lat" / "a1_seed0_n50.log"])
     assert {p.name for p in (out / "videos").iterdir()} == {f"a1_seed0_{s}_goal_reaching.mp4" for s in
-                                                            ("normal", "one_leg_locked")}
+                                                            ("normal", "legs_disabled", "one_leg_locked")}
     samples = read_csv(out / "samples.csv")
-    assert {r["setting"] for r in samples} == {"legs_disabled"} and {int(r["samples"]) for r in samples} == {50}
+    assert {r["setting"] for r in samples} == {"legs_disabled"} and {int(r["samples"]) for r in samples} == {50, 200}
     trained = tmp_path / "outputs" / "lat" / "tiny" / "a1_seed0"
     reused = out / "samples" / "lat" / "a1_seed0_n50"
     assert (reused / "gait_policy.pt").read_bytes() == (trained / "gait_policy.pt").read_bytes()
+    assert (reused / "dynamics_data_legs_disabled.npz").read_bytes() != (
+        trained / "dynamics_data_legs_disabled.npz").read_bytes()
+    # at the run's own count (the tiny preset's 200) the re-learned dynamics are the run's: taken, not built again
+    same = out / "samples" / "lat" / "a1_seed0_n200"
+    assert (same / "dynamics_data_legs_disabled.npz").read_bytes() == (
+        trained / "dynamics_data_legs_disabled.npz").read_bytes()
+    cost = lambda of: sorted(r["normalized_cost"] for r in of if r["setting"] == "legs_disabled")  # noqa: E731
+    assert cost(r for r in samples if int(r["samples"]) == 200) == cost(rows)
     assert (out / "samples.png").read_bytes()[:4] == b"\x89PNG"

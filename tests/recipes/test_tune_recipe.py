@@ -63,7 +63,8 @@ def test_tune_sac_tiny_reuses_the_comparison_agents_for_the_paper_candidate(tmp_
         assert (out / "paper" / "a1_seed0" / agent).read_bytes() == (source / agent).read_bytes()
         assert (out / "lr_3e-4" / "a1_seed0" / agent).read_bytes() != (source / agent).read_bytes()
     built = json.loads((out / "paper" / "a1_seed0" / "builds.json").read_text())
-    assert not any(name.startswith("sac_") for name in built), built
+    agents = {name: entry for name, entry in built.items() if name.startswith("sac_")}
+    assert len(agents) == 3 and all("copied_from" in entry for entry in agents.values()), built
     # evaluated on the half of the targets the agents were trained on (not a half of that half)
     test_goals = len([r for r in read_csv(source / "episodes.csv") if r["task"] == "goal_reaching"])
     for candidate in ("paper", "lr_3e-4"):
