@@ -186,25 +186,23 @@ def reusable_stages(job: Job, specs=None, source_plan=None) -> list:
     holds finished with the key this job plans, of those ``job.reuse_stages`` names (of all when it names none). A
     stage made with another config is never taken, so a job may name a source that shares only its first stages.
     ``source_plan`` (the source's planned stages) stands for the source when it is a job still to run."""
-    from hierloco.runs import normalized
+    from hierloco.runs import ArtifactError, RunDirectory, normalized
 
     if not job.reuse_from:
         return []
-    if source_plan is not None:
-        key_in_source = {spec.filename: normalized(spec.key) for spec in source_plan}.get
-    else:
-        key_in_source = lambda filename: _finished_key(Path(job.reuse_from), filename)  # noqa: E731
+    source = RunDirectory(job.reuse_from, readonly=True)
+    planned = {spec.filename: normalized(spec.key) for spec in source_plan or ()}
+
+    def shared(spec) -> bool:
+        if source_plan is not None:
+            return planned.get(spec.filename) == normalized(spec.key)
+        try:
+            return source.check(spec.name, spec.key, spec.filename)
+        except ArtifactError:  # made with another config, or unreadable: built anew
+            return False
+
     return [spec for spec in (planned_stages(job) if specs is None else specs)
-            if (not job.reuse_stages or spec.name in job.reuse_stages)
-            and key_in_source(spec.filename) == normalized(spec.key)]
-
-
-def _finished_key(directory: Path, filename: str) -> dict | None:
-    """The key of the finished stage whose artifact is ``filename`` in run directory ``directory`` (None: none)."""
-    try:
-        return json.loads((directory / f"{filename}.key.json").read_text()) if (directory / filename).is_file() else None
-    except (OSError, ValueError):
-        return None
+            if (not job.reuse_stages or spec.name in job.reuse_stages) and shared(spec)]
 
 
 def _reuse_stages(job: Job) -> None:
