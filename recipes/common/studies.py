@@ -262,11 +262,14 @@ def _keep_record(records: str | None, job: Job, record: dict | None) -> None:
         job_records.save(record, job_records.record_dir(records, job.run_dir))
 
 
-def plan_text(jobs: Sequence[Job], done: dict[int, JobResult], slots: int | None) -> str:
+def plan_text(jobs: Sequence[Job], done: dict[int, JobResult], slots: int | None,
+              records: str | None = None) -> str:
     """The study's plan: every job's state (finished here, from its record, to run) and the compute each job to run
     will take: over the stages its recipe plans that are not finished yet (in its run directory, or among the stages
-    it reuses), the mean recorded build time of the same stage in the finished jobs of the same method and robot.
-    Then the total, and what it is on ``slots`` jobs at once (``None``: a cluster, not said)."""
+    it reuses), the mean recorded build time of the same stage in the finished jobs of the same method and robot
+    (this study's, and with ``records``, every recorded job of that method, preset and robot: another seed's run
+    of an earlier study estimates this seed's). Then the total, and what it is on ``slots`` jobs at once (``None``:
+    a cluster, not said)."""
     from hierloco.runs import RunDirectory
     from recipes.common.report import job_compute
 
@@ -282,11 +285,25 @@ def plan_text(jobs: Sequence[Job], done: dict[int, JobResult], slots: int | None
             return set()
 
     known: dict[tuple, list[float]] = {}
-    for result in done.values():
-        stages, _ = job_compute(result.source)
+    timed: set[Path] = set()
+
+    def learn(source: str | Path, key: tuple[str, str]) -> None:
+        if Path(source).resolve() in timed:
+            return
+        timed.add(Path(source).resolve())
+        stages, _ = job_compute(str(source))
         for name, seconds in stages.items():
             if seconds is not None:
-                known.setdefault((*group(result.job), name), []).append(seconds / 60)
+                known.setdefault((*key, name), []).append(seconds / 60)
+
+    for result in done.values():
+        learn(result.source, group(result.job))
+    for index, job in enumerate(jobs):
+        if records and index not in done:
+            here = job_records.record_dir(records, job.run_dir)
+            for sibling in sorted(here.parent.glob(f"{group(job)[1]}_seed*")):
+                if (sibling / "job.json").is_file():
+                    learn(sibling, group(job))
     lines = ["| method | run directory | state | compute (min) |", "|---|---|---|---|"]
     todo_minutes, unknown = 0.0, 0
     to_run = {job.run_dir: job for index, job in enumerate(jobs) if index not in done}
@@ -324,8 +341,8 @@ def plan_text(jobs: Sequence[Job], done: dict[int, JobResult], slots: int | None
         summary += (f": about {todo_minutes:.0f} min of compute" + (f" for {left - unknown} of them" if unknown else "")
                     + (f", about {todo_minutes / slots:.0f} min on {slots} at once" if slots else ""))
     if unknown:
-        summary += (f"; {unknown} without an estimate (a stage that no finished job of the same method and robot "
-                    "has built)")
+        summary += (f"; {unknown} without an estimate (a stage that no finished or recorded job of the same "
+                    "method and robot has built)")
     return "\n".join([summary, "", *lines]) + "\n"
 
 
@@ -361,7 +378,8 @@ def run_jobs(jobs: Sequence[Job], *, address: str | None = None, cores_per_job: 
             todo.append(index)
     if dry_run:
         cores = max(1, jobs[0].cores) if jobs else 1
-        print(plan_text(jobs, results, slots=None if address else max(1, _available_cores() // cores)), flush=True)
+        print(plan_text(jobs, results, slots=None if address else max(1, _available_cores() // cores),
+                        records=records), flush=True)
         raise SystemExit(0)
     line = f"study: {len(jobs)} jobs, {len(jobs) - len(todo) - from_records} reused from their run directories"
     print(line + (f", {from_records} from their records in {records}" if records else ""), flush=True)

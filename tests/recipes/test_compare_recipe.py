@@ -79,6 +79,10 @@ def test_compare_through_ray_equals_the_jobs_one_by_one(tmp_path):
     assert planned.returncode == 0, planned.stdout[-2000:] + planned.stderr[-2000:]
     assert "study plan: 4 jobs, 4 finished, 0 to run" in planned.stdout, planned.stdout
     assert planned.stdout.count("| from its record (") == 4 and not (elsewhere / "out").exists()
+    # a seed no study has run yet is estimated from the recorded seeds of the same method and robot
+    new_seed = compare(elsewhere, f"out_dir={elsewhere / 'out'}", f"records={records}", "seeds=[2]", "dry_run=true")
+    assert "study plan: 2 jobs, 0 finished, 2 to run: about" in new_seed.stdout, new_seed.stdout
+    assert "without an estimate" not in new_seed.stdout and new_seed.stdout.count("| to run | about ") == 2
     moved = compare(elsewhere, f"out_dir={elsewhere / 'out'}", f"records={records}")
     assert moved.returncode == 0, moved.stdout[-2000:] + moved.stderr[-2000:]
     assert "study: 4 jobs, 0 reused from their run directories, 4 from their records" in moved.stdout, moved.stdout
