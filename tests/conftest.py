@@ -3,6 +3,12 @@
 import sys
 
 import absl.logging
+import torch
+
+# The suite's own networks are small: one torch thread trains them several times faster than two whenever the
+# cores are shared (the simulation's threads, a Ray worker, a busy CI machine), because a parallel op waits for its
+# slowest thread (benchmarks/bench_sac.py measures it). Recipe runs started as subprocesses keep their own default.
+torch.set_num_threads(1)
 
 # absl's log handler keeps the stream it was created with and closes it on ``logging.shutdown`` when that stream is
 # no longer ``sys.stderr``. Imported under pytest's capture, that stream is pytest's capture file; a recipe run

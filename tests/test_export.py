@@ -23,8 +23,6 @@ from hierloco.exporting import TOLERANCE, export_run
 from hierloco.io import ArtifactError
 
 onnxruntime = pytest.importorskip("onnxruntime")
-torch.set_num_threads(2)
-
 ROBOT = "daisy"
 MODEL_FUNCTIONS = {"com_model_predict", "planner_model_step", "score_goal_reaching", "score_velocity_tracking"}
 

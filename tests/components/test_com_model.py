@@ -11,8 +11,6 @@ from hierloco.components.com_model import (CoMDynamicsModel, TrainedCoMModel, ap
 from hierloco.envs.frames import local_to_world, wrap_angle
 from hierloco.io import ArtifactError
 
-torch.set_num_threads(2)
-
 NOISE = 0.01  # standard deviation of the noise on every local-frame output of the synthetic system (m, rad, m/s)
 
 
