@@ -1,5 +1,6 @@
 """Suite-wide set-up."""
 
+import os
 import sys
 
 import absl.logging
@@ -7,8 +8,10 @@ import torch
 
 # The suite's own networks are small: one torch thread trains them several times faster than two whenever the
 # cores are shared (the simulation's threads, a Ray worker, a busy CI machine), because a parallel op waits for its
-# slowest thread (benchmarks/bench_sac.py measures it). Recipe runs started as subprocesses keep their own default.
+# slowest thread (benchmarks/bench_sac.py measures it). The recipe runs the tests start as subprocesses inherit the
+# same setting (as a study's jobs do, recipes/common/studies.py); the simulation's threads still follow the cores.
 torch.set_num_threads(1)
+os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 # absl's log handler keeps the stream it was created with and closes it on ``logging.shutdown`` when that stream is
 # no longer ``sys.stderr``. Imported under pytest's capture, that stream is pytest's capture file; a recipe run
