@@ -103,28 +103,36 @@ def plot_learning_curve(curve: list[dict], path: Path, *, title: str = "SAC-SAC 
     save_figure(fig, path)
 
 
+ACTORS = {"stochastic": "samples of the policy (how the high level runs it)",
+          "deterministic": "the deterministic actor (the policy's squashed mean)"}
+
+
 def low_level_markdown(robot: str, metadata: dict, tracking: dict, settings: dict,
-                       train_seconds: float | None = None) -> str:
+                       train_seconds: float | None = None, actor: str = "stochastic") -> str:
     """The whole report: budget used, the curve's verdict on it, the curve, the tracking table. ``train_seconds``:
-    the training's wall-clock (a run's ``builds.json``), if known."""
+    the training's wall-clock (a run's ``builds.json``), if known; ``actor``: how the tracking was measured
+    (``"stochastic"`` or ``"deterministic"``, the recipe's ``low_level_actor``)."""
+    if actor not in ACTORS:
+        raise ValueError(f"actor must be one of {sorted(ACTORS)}, got {actor!r}")
     curve = metadata["learning_curve"]
     took = f", {train_seconds / 60:.1f} min of training" if train_seconds is not None else ""
     return (f"# SAC-SAC low level, {robot}\n\n{metadata['frames']:,} frames, {metadata['updates']:,} updates"
             f"{took}; settings {json.dumps(settings, sort_keys=True)}\n\n"
             f"{budget_sentence(budget_from_curve(curve))}\n\n"
-            "The learning curve is measured on the exploring (stochastic) policy; the tracking table uses the "
-            "deterministic actor, each command held from standing, the first action left out of the means; fallen "
+            "The learning curve is measured on the exploring (stochastic) policy; the tracking table acts with "
+            f"{ACTORS[actor]}, each command held from standing, the first action left out of the means; fallen "
             "robots are left out of the error means and counted in the fall rate.\n\n"
             f"## Learning curve\n\n{learning_curve_markdown(curve)}\n\n"
-            f"## Tracking per command (deterministic actor)\n\n{tracking_markdown(tracking)}\n")
+            f"## Tracking per command ({actor} actor)\n\n{tracking_markdown(tracking)}\n")
 
 
 def write_low_level_report(out: Path, robot: str, metadata: dict, tracking: dict, settings: dict, *,
-                           train_seconds: float | None = None, name: str = "report.md") -> Path:
+                           train_seconds: float | None = None, name: str = "report.md",
+                           actor: str = "stochastic") -> Path:
     from hierloco.io import write_text
 
     out.mkdir(parents=True, exist_ok=True)
-    write_text(out / name, low_level_markdown(robot, metadata, tracking, settings, train_seconds))
+    write_text(out / name, low_level_markdown(robot, metadata, tracking, settings, train_seconds, actor))
     plot_learning_curve(metadata["learning_curve"], out / "learning_curve.png",
                         title=f"SAC-SAC low level ({robot}): learning curve")
     return out / name
@@ -148,7 +156,8 @@ def main(argv=None) -> None:
     params = json.loads((run_dir / "sac_low_level.pt.key.json").read_text())["params"]
     robot = json.loads((run_dir / "run.json").read_text())["robot"]
     seconds = RunDirectory(run_dir, readonly=True).builds().get("sac_low_level", {}).get("seconds")
-    print(write_low_level_report(out, robot, trained.metadata, tracking, params, train_seconds=seconds))
+    actor = json.loads((run_dir / "sac_low_level_tracking.json.key.json").read_text())["params"]["actor"]
+    print(write_low_level_report(out, robot, trained.metadata, tracking, params, train_seconds=seconds, actor=actor))
 
 
 if __name__ == "__main__":

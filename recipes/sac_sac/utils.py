@@ -67,9 +67,10 @@ def build_tracking(run, params, low_level) -> TrackingReport:
                                         seed=params["seed"], nthread=run.nthread)
     walking_video(run, low_level(1), run.path / "videos" / "sac_low_level_walking.mp4")
     trained = low_level(1).trained
-    params = {"seed": run.cfg.seed, **config.section(run.cfg, "low_level")}
-    write_low_level_report(run.path, run.robot.name, trained.metadata, report, params, name="sac_low_level_report.md",
-                           train_seconds=run.dir.builds().get("sac_low_level", {}).get("seconds"))
+    settings = {"seed": run.cfg.seed, **config.section(run.cfg, "low_level")}
+    write_low_level_report(run.path, run.robot.name, trained.metadata, report, settings, name="sac_low_level_report.md",
+                           train_seconds=run.dir.builds().get("sac_low_level", {}).get("seconds"),
+                           actor=params["actor"])
     return TrackingReport(report)
 
 

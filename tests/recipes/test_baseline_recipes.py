@@ -43,6 +43,9 @@ def test_baseline_recipe_runs(method, settings, tmp_path):
         report = (tmp_path / "sac_low_level_report.md").read_text()  # its curve, the budget, tracking per command
         assert "## Learning curve" in report and "frames" in report.split("\n")[2]
         assert sum(line.startswith("| (") for line in report.splitlines()) == 27
+        # the table says how the low level acted: the recipe's default, samples of its policy
+        assert "the tracking table acts with samples of the policy" in report
+        assert "## Tracking per command (stochastic actor)" in report and "deterministic" not in report
         again = subprocess.run([sys.executable, str(ROOT / "recipes" / "sac_sac" / "report.py"), str(tmp_path),
                                 str(tmp_path / "report")], capture_output=True, text=True, timeout=120)
         assert again.returncode == 0, again.stderr[-2000:]
