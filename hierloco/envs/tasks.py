@@ -233,6 +233,12 @@ class Task:
         it is tested on all of them (Li et al., RA-L 2021, Sec. IV-B). See each task for its rule."""
         raise NotImplementedError(f"{self.name}: no training split for {type(self).__name__}")
 
+    @property
+    def training_episodes(self) -> list[int] | None:
+        """The episodes of this task whose targets :meth:`training_split` keeps, or None when the split cuts inside
+        an episode (one velocity schedule, one path), so no episode is all held-out targets."""
+        return None
+
 
 @dataclass
 class TaskResult:
@@ -331,8 +337,18 @@ class GoalReaching(Task):
         first = np.argmax(within, axis=1)
         return {"steps_to_goal": np.where(within.any(1), first // per_action + 1.0, np.nan)}
 
+    @property
+    def training_episodes(self) -> list[int]:
+        """Every other goal: ``[0, 2, 4, ...]``.
+
+            >>> GoalReaching().training_episodes
+            [0, 2, 4, 6]
+        """
+        return list(range(0, self.num_episodes, 2))
+
     def training_split(self) -> "GoalReaching":
-        return GoalReaching(goals=self.goals[::2].numpy(), num_steps=self.num_steps, name=f"{self.name}_train")
+        return GoalReaching(goals=self.goals[self.training_episodes].numpy(), num_steps=self.num_steps,
+                            name=f"{self.name}_train")
 
     def _tracking_error(self, state, next_state, target):
         return torch.linalg.vector_norm(target - next_state[..., :2], dim=-1)

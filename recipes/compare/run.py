@@ -8,8 +8,8 @@ jobs on Ray, then the comparison table and bar charts.
 
 Each method runs as its own recipe in its own run directory (``outputs/<method>/<preset>/<robot>_seed<seed>``), so
 finished runs are reused. Writes ``comparison.csv``, ``comparison.md``, ``wallclock.md``,
-``comparison_<setting>.png`` and ``paper_check.md`` (the paper's claims beside our numbers, ``paper_check.py``) in
-``out_dir``.
+``comparison_<setting>.png`` and ``paper_check.md`` (the paper's claims beside our numbers, ``paper_check.py``; each
+claim that does not hold with the cause we checked, from the YAML file ``causes``) in ``out_dir``.
 """
 
 import hierloco  # noqa: F401  (first: headless MuJoCo rendering is set before anything loads MuJoCo)
@@ -59,6 +59,11 @@ def check(cfg) -> list:
                          if not (isinstance(s, int) and s >= 0)]
     if not (isinstance(cfg.ray.cores_per_job, int) and cfg.ray.cores_per_job >= 1):
         problems.append(f"ray.cores_per_job must be an integer >= 1, got {cfg.ray.cores_per_job!r}")
+    if cfg.causes is not None:
+        try:
+            paper_check.load_causes(cfg.causes)
+        except ValueError as error:
+            problems.append(str(error))
     if not isinstance(cfg.generalization, bool):
         problems.append(f"generalization must be true or false, got {cfg.generalization!r}")
     if problems:
@@ -106,8 +111,9 @@ def main(cfg) -> None:
         table = write_study_tables(rows, results, Path(cfg.out_dir), name="comparison", settings=cfg.settings,
                                    title=f"Normalised cost ({cfg.preset_name} preset, {seeds_text(cfg)})")
         checks = paper_check.check_claims(rows, tuned_ik=OmegaConf.to_container(cfg.tuned_ik) if cfg.tuned_ik else None)
+        causes = paper_check.load_causes(cfg.causes) if cfg.causes is not None else []
         write_text(Path(cfg.out_dir) / "paper_check.md", paper_check.paper_check_markdown(
-            checks, title=f"{cfg.preset_name} preset, {seeds_text(cfg)}"))
+            checks, title=f"{cfg.preset_name} preset, {seeds_text(cfg)}", causes=causes))
         print("\n" + table)
         print(f"comparison table, figures and the paper's claims checked (paper_check.md) in {cfg.out_dir}/")
     if studies.report_failures(results):

@@ -438,6 +438,7 @@ def test_training_split_goals_every_other_on_both_axes():
     half = task.training_split()
     assert isinstance(half, GoalReaching) and half.name == "goals_train"
     assert torch.equal(half.goals, task.goals[[0, 2, 4, 6]])
+    assert task.training_episodes == [0, 2, 4, 6] and GoalReaching(num_goals=5).training_episodes == [0, 2, 4]
     assert half.num_steps == task.num_steps
     on_x = (half.goals[:, 1].abs() < 1e-6) & (half.goals[:, 0].abs() > 1)
     on_y = (half.goals[:, 0].abs() < 1e-6) & (half.goals[:, 1].abs() > 1)
@@ -448,6 +449,7 @@ def test_training_split_velocities_first_half_on_both_axes():
     task = VelocityTracking()
     half = task.training_split()
     assert half.name == "velocity_tracking_train"
+    assert task.training_episodes is None  # one episode mixes training and held-out velocities
     assert torch.equal(half.velocities, torch.tensor([[0.0, 0.2], [0.2, 0.0]]))  # one target on each axis
     assert half.steps_per_target == 5 and half.num_steps == task.num_steps == 40
     odd = VelocityTracking(velocities=[[0.1, 0.0], [0.0, 0.1], [-0.1, 0.0]], steps_per_target=2, rounds=1)

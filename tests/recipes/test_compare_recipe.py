@@ -176,3 +176,17 @@ def test_bad_method_seeds_are_refused_before_any_job(method_seeds, message):
     cfg = compare_config("methods=[lat,sac]", "robots=[a1]", f"+method_seeds.{method_seeds}")
     with pytest.raises(ConfigError, match=message.replace("[", r"\[")):
         run.check(cfg)
+
+
+def test_a_bad_causes_file_is_refused_before_any_job(tmp_path):
+    from recipes.common.config import ConfigError
+    from recipes.compare import run
+
+    causes = tmp_path / "causes.yaml"
+    causes.write_text("- {claims: [lat_is_great], cause: because}")
+    with pytest.raises(ConfigError, match="unknown claim 'lat_is_great'"):
+        run.check(compare_config("robots=[a1]", f"causes={causes}"))
+    with pytest.raises(ConfigError, match="causes: no file"):
+        run.check(compare_config("robots=[a1]", f"causes={tmp_path / 'missing.yaml'}"))
+    causes.write_text("- {claims: [lib_worse], cause: because}")
+    assert run.check(compare_config("robots=[a1]", f"causes={causes}"))[0].name == "a1"
