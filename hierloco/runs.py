@@ -76,6 +76,23 @@ def digest(key: dict) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:12]
 
 
+def cpu_description() -> str:
+    """This machine's CPU model and the instruction set torch's kernels use, e.g. ``"AMD EPYC (AVX512)"``: floating-point
+    results, and so a long training run's trajectory, can differ between CPUs (``benchmarks/sac_reproducibility.py``),
+    so every stage's build records it (``builds.json``)."""
+    import platform
+
+    import torch
+
+    name = platform.processor() or "unknown CPU"
+    try:
+        name = next(line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text().splitlines()
+                    if line.startswith("model name"))
+    except (OSError, StopIteration):
+        pass
+    return f"{name} ({torch.backends.cpu.get_cpu_capability()})"
+
+
 def _describe_holder(lock: Path) -> str:
     try:
         info = json.loads(lock.read_text() or "{}")
@@ -189,8 +206,9 @@ class RunDirectory:
 
     # ------------------------------------------------------------------------------------------------ keys
     def builds(self) -> dict[str, dict]:
-        """``builds.json``: stage -> ``{"seconds", "threads", "host", "finished"}`` of its last build (``{}`` if none
-        was recorded, as for runs made before it existed)."""
+        """``builds.json``: stage -> ``{"seconds", "threads", "host", "cpu", "finished"}`` of its last build (``{}`` if
+        none was recorded, as for runs made before it existed; ``cpu`` (:func:`cpu_description`) is missing in builds
+        recorded before it was)."""
         try:
             builds = json.loads((self.path / BUILDS_NAME).read_text())
         except (OSError, ValueError):
@@ -201,6 +219,7 @@ class RunDirectory:
         threads = os.environ.get("OMP_NUM_THREADS") or (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
                                                         else os.cpu_count())
         builds = {**self.builds(), name: {"seconds": round(seconds, 3), "threads": int(threads), "host": socket.gethostname(),
+                                          "cpu": cpu_description(),
                                           "finished": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}}
         write_text(self.path / BUILDS_NAME, json.dumps(builds, indent=1, sort_keys=True))
 

@@ -65,6 +65,7 @@ def test_a_build_s_wall_clock_is_recorded_and_reported_when_reused(tmp_path):
     run.stage("slow", CONFIG, slow, Stage.save, Stage().load, "slow.json")
     recorded = json.loads((tmp_path / "builds.json").read_text())["slow"]
     assert 0.2 <= recorded["seconds"] < 5 and recorded["threads"] >= 1 and recorded["host"]
+    assert recorded["cpu"].endswith(")") and "(" in recorded["cpu"]  # the CPU and the instruction set torch uses
     rerun = RunDirectory(tmp_path)
     rerun.stage("slow", CONFIG, lambda: 1 / 0, Stage.save, Stage().load, "slow.json")
     assert rerun.reused["slow"] and rerun.timings["slow"] < 0.2, "loading is not building"
