@@ -30,6 +30,7 @@ from torchrl.data import Categorical
 from tqdm.auto import tqdm
 
 from hierloco.envs.latent_env import LatentActionEnv
+from hierloco.envs.robots.spec import CONTROL_TIMESTEP
 from hierloco.io import ArtifactError, load_arrays, save_arrays
 
 
@@ -76,6 +77,34 @@ class TransitionData:
     def save(self, path: str | os.PathLike) -> None:
         save_arrays(path, {"com_state": self.com_state, "action": self.action,
                            "next_com_state": self.next_com_state}, {**self.metadata, "kind": "transitions"})
+
+    def achievable_speeds(self, percentile: float = 95.0) -> dict[str, float]:
+        """What the robot can still do under this data's low level and setting (e.g. a fault): the ``percentile`` of
+        its speed over the transitions in each direction of the local frame at each action's start, ``forward``,
+        ``backward``, ``left``, ``right`` (m/s), and of its turning rate ``turn`` (|yaw rate|, rad/s). An action
+        lasts ``metadata["low_level"]["steps_per_action"]`` control steps of 0.01 s.
+
+            >>> state = np.zeros((2, 5)); state[:, 2] = np.pi / 2          # facing +y
+            >>> moved = state.copy(); moved[:, 1] = [0.3, -0.1]            # 0.3 m forward, 0.1 m back in 1 s
+            >>> data = TransitionData(state, np.zeros((2, 1)), moved, {"low_level": {"steps_per_action": 100}})
+            >>> {k: round(v, 2) for k, v in data.achievable_speeds(percentile=100).items()}
+            {'forward': 0.3, 'backward': 0.1, 'left': 0.0, 'right': 0.0, 'turn': 0.0}
+        """
+        from hierloco.components.com_model import local_transition
+
+        try:
+            seconds = int(self.metadata["low_level"]["steps_per_action"]) * CONTROL_TIMESTEP
+        except (KeyError, TypeError, ValueError):
+            raise ValueError("achievable_speeds: the data's metadata names no low_level.steps_per_action") from None
+        _, delta = local_transition(self.com_state, self.next_com_state)
+        dx, dy, dyaw = (delta[:, i].numpy() / seconds for i in range(3))
+        at = lambda values: float(np.percentile(values, percentile))  # noqa: E731
+        return {"forward": at(dx), "backward": at(-dx), "left": at(dy), "right": at(-dy), "turn": at(np.abs(dyaw))}
+
+    def summary(self) -> dict:
+        """What a run's ``report.json`` keeps of this data (and so a study's job record): the ``metadata`` and the
+        :meth:`achievable_speeds`."""
+        return {**self.metadata, "achievable_speeds": self.achievable_speeds()}
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> "TransitionData":

@@ -18,7 +18,6 @@ from pathlib import Path
 
 import numpy as np
 
-from hierloco.components.com_model import local_transition
 from hierloco.components.dynamics_data import TransitionData
 from hierloco.io import write_text
 from hierloco.plots import plot_samples
@@ -114,40 +113,52 @@ def sample_jobs(cfg, robots) -> list:
     return jobs
 
 
+def _report(result) -> dict:
+    """The job's ``report.json``, from its run directory or its record (``{}`` if it has none)."""
+    try:
+        return json.loads((Path(result.source) / "report.json").read_text())
+    except (OSError, ValueError):
+        return {}
+
+
 def achievable_speeds(results) -> str:
     """Per robot, profile and fault, what the robot can still do: the 95th percentile of its speed in each
-    direction over the random-action dynamics data (m/s, in the local frame at the start of each action)."""
+    direction over the random-action dynamics data (m/s, in the local frame at the start of each action;
+    :meth:`TransitionData.achievable_speeds`), as each job's ``report.json`` keeps it, so a job taken from its
+    record has it too (for runs made before reports kept it, from the data in the run directory)."""
     lines = ["| method | robot | profile | setting | forward | backward | left | right | turn (rad/s) | transitions "
              "dropped for falls |", "|---|---|---|---|---|---|---|---|---|---|"]
     for result in results:
         if not result.ok or result.job.labels.get("method") not in ("lat", "ik"):
             continue
         robot = result.rows[0]["robot"] if result.rows else "?"
-        for path in sorted(Path(result.job.run_dir).glob("dynamics_data_*.npz")):
-            data = TransitionData.load(path)
-            _, delta = local_transition(data.com_state, data.next_com_state)
-            duration = 1.0
-            dx, dy, dyaw = (delta[:, i].numpy() / duration for i in range(3))
-            p = lambda v: float(np.percentile(v, 95))  # noqa: E731
+        for name, entry in sorted(_report(result).items()):
+            if not name.startswith("dynamics_data_"):
+                continue
+            speeds = entry.get("achievable_speeds")
+            data = Path(result.job.run_dir) / f"{name}.npz"
+            if speeds is None and data.is_file():
+                speeds = TransitionData.load(data).achievable_speeds()
+            cells = " | ".join(f"{speeds[k]:.2f}" if speeds else "-"
+                               for k in ("forward", "backward", "left", "right", "turn"))
             lines.append(f"| {result.job.labels['method']} | {robot} | {result.job.labels['profile']} | "
-                         f"{path.stem.removeprefix('dynamics_data_')} | {p(dx):.2f} | {p(-dx):.2f} | {p(dy):.2f} | "
-                         f"{p(-dy):.2f} | {p(np.abs(dyaw)):.2f} | {data.metadata.get('dropped_failures', 0)} |")
+                         f"{name.removeprefix('dynamics_data_')} | {cells} | {entry.get('dropped_failures', 0)} |")
     return "\n".join(lines) + "\n"
 
 
 def low_level_checks(results) -> str:
-    """Per LAT run, how well its gait policy reproduces its experts in simulation (``gait_policy_check.json``): a
-    profile can leave it below the run's own bar if ``checks.min_reproduced_fraction`` was lowered for the study."""
+    """Per LAT run, how well its gait policy reproduces its experts in simulation (its ``gait_policy_check``, from
+    ``report.json``): a profile can leave it below the run's own bar if ``checks.min_reproduced_fraction`` was
+    lowered for the study."""
     lines = ["| robot | profile | run directory | experts reproduced within 0.05 m/s | median error m/s | fell |",
              "|---|---|---|---|---|---|"]
     for result in results:
-        path = Path(result.job.run_dir) / "gait_policy_check.json"
-        if result.job.labels.get("method") != "lat" or not path.exists() or result.job.reuse_from:
+        check = _report(result).get("gait_policy_check")
+        if result.job.labels.get("method") != "lat" or not check or result.job.reuse_from:
             continue
-        check = json.loads(path.read_text())
         errors = np.asarray(check["reproduction_error"], dtype=float)
         robot = result.rows[0]["robot"] if result.rows else "?"
-        lines.append(f"| {robot} | {result.job.labels['profile']} | {result.job.run_dir} | "
+        lines.append(f"| {robot} | {result.job.labels['profile']} | {result.source} | "
                      f"{100 * check['reproduced_fraction']:.0f}% | {np.median(errors):.3f} | "
                      f"{int(np.isinf(errors).sum())} |")
     return "\n".join(lines) + "\n"

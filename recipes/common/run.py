@@ -151,7 +151,8 @@ class Run:
         if isinstance(artifact, TaskEvaluation):
             self.evaluations[(stage.params["setting"], stage.params["task_name"])] = artifact
         else:
-            self.reports[name] = dict(getattr(artifact, "metadata", artifact))
+            summary = getattr(artifact, "summary", None)  # what the artifact says of itself, else its metadata
+            self.reports[name] = summary() if callable(summary) else dict(getattr(artifact, "metadata", artifact))
         CURRENT["stage"] = None
         return artifact
 

@@ -4,6 +4,7 @@ learned in (A1 sits down on unpowered rear legs: every random action ends in a f
 others."""
 
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -19,7 +20,7 @@ def test_adverse_tiny(tmp_path):
                "methods=[lat]", "profiles=[own]", "faults.own=[normal,legs_disabled,rear_limp,one_leg_locked]",
                "samples=[50,200]",
                "sample_methods=[lat]", f"out_dir={out}", 'overrides=["eval.generalization=null","eval.figures=false"]',
-               '+method_overrides.lat=["checks.min_expert_reach=0.3"]']
+               '+method_overrides.lat=["checks.min_expert_reach=0.3"]', f"records={tmp_path / 'records'}"]
     result = subprocess.run(command, cwd=tmp_path, env={**os.environ, "WANDB_MODE": "offline"}, capture_output=True,
                             text=True, timeout=1200)
     assert result.returncode == 1, result.stdout[-3000:] + result.stderr[-3000:]
@@ -51,3 +52,20 @@ def test_adverse_tiny(tmp_path):
     cost = lambda of: sorted(r["normalized_cost"] for r in of if r["setting"] == "legs_disabled")  # noqa: E731
     assert cost(r for r in samples if int(r["samples"]) == 200) == cost(rows)
     assert (out / "samples.png").read_bytes()[:4] == b"\x89PNG"
+
+
+    # a later session with the records alone (no run directory): the same speeds and low-level checks, from each
+    # job's report.json in its record
+    shutil.move(tmp_path / "outputs", tmp_path / "outputs_of_an_earlier_machine")
+    later = [c for c in command if not c.startswith(("faults.own=", "samples=", "out_dir="))]
+    again = subprocess.run(later + ["faults.own=[normal,legs_disabled,one_leg_locked]", "samples=[]",
+                                    f"out_dir={tmp_path / 'again'}"], cwd=tmp_path,
+                           env={**os.environ, "WANDB_MODE": "offline"}, capture_output=True, text=True, timeout=600)
+    assert again.returncode == 0, again.stdout[-3000:] + again.stderr[-3000:]
+    assert "0 reused from their run directories, 2 from their records" in again.stdout, again.stdout[-2000:]
+    section = lambda text, title: text.split(title)[1].split("\n## ")[0]  # noqa: E731
+    later_table = (tmp_path / "again" / "adverse.md").read_text()
+    speeds = "## Speeds each fault leaves (random-action dynamics data)"
+    assert section(later_table, speeds) == section(table, speeds) and "| lat | a1 | own | legs_disabled |" in table
+    checks = "## LAT's low level: its experts reproduced in simulation"
+    assert section(later_table, checks).count("| a1 | own | ") == 1, later_table
