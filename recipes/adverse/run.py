@@ -52,6 +52,12 @@ def check(cfg) -> list:
                      if s not in SETTINGS]
     problems += [f"method_overrides names {m!r}, which is in neither methods nor sample_methods"
                  for m in cfg.method_overrides if m not in (*cfg.methods, *cfg.sample_methods)]
+    for profile, per_method in cfg.profile_overrides.items():
+        if profile not in PROFILES:
+            problems.append(f"unknown robot profile {profile!r} in profile_overrides (profiles: {', '.join(PROFILES)})")
+            continue
+        problems += [f"profile_overrides.{profile} names {m!r}, which is not in methods" for m in per_method
+                     if m not in cfg.methods]
     problems += [f"samples must be integers >= 10, got {n!r}" for n in cfg.samples if not (isinstance(n, int) and
                                                                                            n >= 10)]
     if problems:
@@ -80,7 +86,8 @@ def fault_jobs(cfg, robots) -> tuple[list, list]:
                 for seed in cfg.seeds:
                     common = [f"preset={cfg.preset_name}", f"robot={spec.reference}", f"seed={seed}",
                               f"robot_profile={profile}", "progress=false", *variant, *cfg.overrides,
-                              *cfg.method_overrides.get(method, [])]
+                              *cfg.method_overrides.get(method, []),
+                              *cfg.profile_overrides.get(profile, {}).get(method, [])]
                     home = run_dir(method, cfg.preset_name, spec, profile, seed)
                     labels = {"method": method, "profile": profile}
                     paper = [s for s in settings if s in PAPER_SETTINGS] or ["normal"]

@@ -69,3 +69,32 @@ def test_adverse_tiny(tmp_path):
     assert section(later_table, speeds) == section(table, speeds) and "| lat | a1 | own | legs_disabled |" in table
     checks = "## LAT's low level: its experts reproduced in simulation"
     assert section(later_table, checks).count("| a1 | own | ") == 1, later_table
+
+
+def adverse_config(*overrides):
+    from hydra import compose, initialize_config_dir
+
+    with initialize_config_dir(config_dir=str(ROOT / "recipes" / "adverse"), version_base=None):
+        return compose(config_name="config", overrides=list(overrides))
+
+
+def test_profile_overrides_reach_only_that_profiles_runs_of_that_method():
+    from recipes.adverse import run
+
+    cfg = adverse_config("robots=[a1]", "seeds=[0]", "profiles=[own,stiff]", "samples=[]")
+    main, extra = run.fault_jobs(cfg, run.check(cfg))
+    bar = "checks.min_reproduced_fraction=0.25"
+    with_bar = {(job.labels["method"], job.labels["profile"]) for job in main + extra if bar in job.overrides}
+    assert with_bar == {("lat", "stiff")}
+
+
+def test_bad_profile_overrides_are_refused_before_any_job():
+    import pytest
+
+    from recipes.adverse import run
+    from recipes.common.config import ConfigError
+
+    with pytest.raises(ConfigError, match="unknown robot profile 'sticky' in profile_overrides"):
+        run.check(adverse_config("robots=[a1]", "+profile_overrides.sticky={lat: []}"))
+    with pytest.raises(ConfigError, match="profile_overrides.stiff names 'sac', which is not in methods"):
+        run.check(adverse_config("robots=[a1]", "+profile_overrides.stiff.sac=[]"))
