@@ -28,6 +28,7 @@ Example:
 from __future__ import annotations
 
 import fcntl
+import functools
 import hashlib
 import json
 import os
@@ -76,20 +77,20 @@ def digest(key: dict) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:12]
 
 
+@functools.cache
 def cpu_description() -> str:
     """This machine's CPU model and the instruction set torch's kernels use, e.g. ``"AMD EPYC (AVX512)"``: floating-point
     results, and so a long training run's trajectory, can differ between CPUs (``benchmarks/sac_reproducibility.py``),
-    so every stage's build records it (``builds.json``)."""
+    so every stage's build records it (``builds.json``). Found once per process."""
     import platform
 
     import torch
 
-    name = platform.processor() or "unknown CPU"
     try:
         name = next(line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text().splitlines()
                     if line.startswith("model name"))
     except (OSError, StopIteration):
-        pass
+        name = platform.processor() or "unknown CPU"
     return f"{name} ({torch.backends.cpu.get_cpu_capability()})"
 
 
