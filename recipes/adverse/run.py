@@ -102,13 +102,17 @@ def fault_jobs(cfg, robots) -> tuple[list, list]:
 def sample_jobs(cfg, robots) -> list:
     """One job per method, robot, seed and sample count: the dynamics re-learned with the rear legs locked from that
     many transitions, starting from the stages it shares with the method's run of the paper's settings (the trained
-    low level; at that run's own count, its dynamics and evaluations too)."""
+    low level; at that run's own count, its dynamics and evaluations too). Where that run is not finished in its
+    run directory (it is still to run, or the study takes it from its record, which keeps no artifacts), only the
+    first count starts from it and the other counts start from the first, so the low level is built once, not once
+    per count."""
     jobs = []
     for robot, spec in zip(cfg.robots, robots):
         for method in cfg.sample_methods:
             recipe, variant = studies.resolve_method(method, cfg.variants)
             for seed in cfg.seeds:
-                source = run_dir(method, cfg.preset_name, spec, "own", seed)
+                paper_run = run_dir(method, cfg.preset_name, spec, "own", seed)
+                source = paper_run
                 for count in cfg.samples:
                     target = Path(cfg.out_dir) / "samples" / method / f"{spec.name}_seed{seed}_n{count}"
                     overrides = [f"preset={cfg.preset_name}", f"robot={spec.reference}", f"seed={seed}",
@@ -117,6 +121,8 @@ def sample_jobs(cfg, robots) -> list:
                     jobs.append(studies.Job(recipe, str(target), overrides, labels={"method": method,
                                                                                     "samples": count},
                                             reuse_from=str(source)))
+                    if source == paper_run and not (paper_run / studies.DONE).is_file():
+                        source = target  # the first count's run directory, for every later count
     return jobs
 
 

@@ -98,3 +98,21 @@ def test_bad_profile_overrides_are_refused_before_any_job():
         run.check(adverse_config("robots=[a1]", "+profile_overrides.sticky={lat: []}"))
     with pytest.raises(ConfigError, match="profile_overrides.stiff names 'sac', which is not in methods"):
         run.check(adverse_config("robots=[a1]", "+profile_overrides.stiff.sac=[]"))
+
+
+def test_sample_counts_build_the_low_level_once_when_the_paper_run_is_not_on_disk(tmp_path, monkeypatch):
+    from recipes.adverse import run
+    from recipes.common import studies
+
+    monkeypatch.chdir(tmp_path)
+    cfg = adverse_config("robots=[a1]", "seeds=[0]", "sample_methods=[lat]", "samples=[200,500,2000]")
+    robots = run.check(cfg)
+    paper_run = str(run.run_dir("lat", cfg.preset_name, robots[0], "own", 0))
+    # the paper's run is not on disk (to run, or from its record): the first count starts from it, the rest from
+    # the first count's run directory
+    first, *rest = run.sample_jobs(cfg, robots)
+    assert first.reuse_from == paper_run and [job.reuse_from for job in rest] == [first.run_dir] * 2
+    # finished in its run directory: every count starts from it (its dynamics too, at its own count)
+    (tmp_path / paper_run).mkdir(parents=True)
+    (tmp_path / paper_run / studies.DONE).write_text("{}")
+    assert [job.reuse_from for job in run.sample_jobs(cfg, robots)] == [paper_run] * 3
