@@ -112,7 +112,7 @@ def sample_jobs(cfg, robots) -> list:
             recipe, variant = studies.resolve_method(method, cfg.variants)
             for seed in cfg.seeds:
                 paper_run = run_dir(method, cfg.preset_name, spec, "own", seed)
-                source = paper_run
+                on_disk, source = (paper_run / studies.DONE).is_file(), paper_run
                 for count in cfg.samples:
                     target = Path(cfg.out_dir) / "samples" / method / f"{spec.name}_seed{seed}_n{count}"
                     overrides = [f"preset={cfg.preset_name}", f"robot={spec.reference}", f"seed={seed}",
@@ -121,7 +121,7 @@ def sample_jobs(cfg, robots) -> list:
                     jobs.append(studies.Job(recipe, str(target), overrides, labels={"method": method,
                                                                                     "samples": count},
                                             reuse_from=str(source)))
-                    if source == paper_run and not (paper_run / studies.DONE).is_file():
+                    if not on_disk and source == paper_run:
                         source = target  # the first count's run directory, for every later count
     return jobs
 
