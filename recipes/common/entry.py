@@ -28,12 +28,19 @@ def user_errors() -> tuple[type[BaseException], ...]:
     from hierloco.runs import ReadOnlyRunError, RunLockedError
     from recipes.common.config import ConfigError
 
-    errors = [ConfigError, ArtifactError, RunLockedError, ReadOnlyRunError, OmegaConfBaseException]
+    return (ConfigError, ArtifactError, RunLockedError, ReadOnlyRunError, OmegaConfBaseException, *findings())
+
+
+def findings() -> tuple[type[BaseException], ...]:
+    """The errors that are findings about the robot and its setting, not about the code or the command: experts
+    that do not walk as commanded, a gait policy that does not reproduce them, a setting in which random actions
+    only fall. The same config fails the same way on any machine, so a study records them (``failed.json``) and
+    reports the job as not evaluable rather than running it again."""
     from hierloco.components.dynamics_data import DynamicsDataError
     from hierloco.components.expert_library import ExpertQualityError
     from recipes.common.stages import GaitPolicyQualityError
 
-    return (*errors, ExpertQualityError, GaitPolicyQualityError, DynamicsDataError)
+    return ExpertQualityError, GaitPolicyQualityError, DynamicsDataError
 
 
 def one_line(error: BaseException) -> str:

@@ -7,7 +7,10 @@ per job. A study given a records directory (``records=results/<study>/jobs``) wr
 ran or reused, and takes a job from its record when its run directory is missing (a fresh machine, a cluster
 without shared storage) *only* if the record ran the same method and overrides and every stage the recipe plans
 today has the key the record holds: a changed default or code path that enters a key runs the job again, exactly
-as it would with its run directory at hand. Records are committed like any measured table; a study that needs more
+as it would with its run directory at hand. A job that ended in a finding about its setting (experts that do not
+walk, a fault in which every random action falls: ``recipes/common/entry.py``) leaves a record too, its
+``failed.json``: a later study reports it as not evaluable, without running it, while the stage it failed in has
+today's key. Records are committed like any measured table; a study that needs more
 compute than one machine has is run in parts, each part adding its jobs' records.
 
 Example:
@@ -27,6 +30,7 @@ from hierloco.io import write_text
 from hierloco.runs import StageSpec, normalized
 from hierloco.results import read_csv
 
+FAILED = "failed.json"  # a run's finding (recipes/common/entry.py: findings): the stage, its key and the error
 FILES = ("job.json", "episodes.csv", "results.csv", "report.json", "builds.json")
 KEYS = "*.key.json"  # anywhere below the run directory (a stage file may be in a folder)
 MAX_BYTES = 2_000_000  # a record file larger than this is not a record's (an artifact under a record's name)
@@ -59,6 +63,32 @@ def files_of(run_dir: str | os.PathLike) -> dict[str, str]:
     if "job.json" not in record or "episodes.csv" not in record:
         raise ValueError(f"{run_dir} holds no finished job (job.json and episodes.csv)")
     return record
+
+
+def failure_of(run_dir: str | os.PathLike, signature: dict) -> dict[str, str]:
+    """The record of a job that ended in a finding (its run directory's ``failed.json``, written by the recipe):
+    that file with the job's ``signature`` added, and the keys of the stages it finished."""
+    run_dir = Path(run_dir)
+    failure = json.loads((run_dir / FAILED).read_text())
+    record = {FAILED: json.dumps({"signature": signature, **failure}, indent=2)}
+    for path in sorted(run_dir.rglob(KEYS)):
+        if path.is_file() and path.stat().st_size <= MAX_BYTES:
+            record[path.relative_to(run_dir).as_posix()] = path.read_text()
+    return record
+
+
+def finding(directory: str | os.PathLike, signature: dict, specs: Iterable[StageSpec]) -> str | None:
+    """The error of the finding recorded in ``directory`` (a run directory or a record) for a job with this
+    ``signature``, if the stage it failed in has, in today's plan ``specs``, the key it failed with (a stage's key
+    holds those of the stages it depends on: the same inputs, the same failure); else ``None``."""
+    try:
+        failure = json.loads((Path(directory) / FAILED).read_text())
+    except (OSError, ValueError):
+        return None
+    if failure.get("signature") != signature:
+        return None
+    keys = {spec.name: normalized(spec.key) for spec in specs}
+    return failure.get("error") if keys.get(failure.get("stage"), object()) == failure.get("key") else None
 
 
 def save(record: dict[str, str], directory: str | os.PathLike) -> bool:
@@ -111,4 +141,4 @@ def rows(directory: str | os.PathLike) -> list[dict]:
     return read_csv(Path(directory) / "episodes.csv")
 
 
-__all__ = ["FILES", "current", "files_of", "holds_job", "record_dir", "rows", "save"]
+__all__ = ["FAILED", "FILES", "current", "failure_of", "files_of", "finding", "holds_job", "record_dir", "rows", "save"]

@@ -23,9 +23,11 @@ from hierloco.envs.robots import get_robot
 from hierloco.io import write_text
 from hierloco.loggers import NullLogger, RunLogger, metric_component
 from hierloco.results import TaskEvaluation, write_results
-from hierloco.runs import RunDirectory
+from hierloco.runs import RunDirectory, normalized
 from hierloco.trained import MANIFEST
 from recipes.common import report
+from recipes.common.entry import findings, one_line
+from recipes.common.records import FAILED
 from recipes.common.config import ConfigError, make_task_from_spec, section
 from recipes.common.stages import Stage, task_specs
 
@@ -141,9 +143,15 @@ class Run:
             raise ConfigError(f"stage {name!r} is not finished in {self.path}: train the run first (train.py)")
         CURRENT["stage"] = name
         timings: dict = {}
-        artifact = self.dir.stage(name, stage.key, lambda: build(self, stage.params, *inputs),
-                                  lambda a, path: _save_without_wall_clock(a, path, timings), stage.artifact.load,
-                                  stage.filename)
+        try:
+            artifact = self.dir.stage(name, stage.key, lambda: build(self, stage.params, *inputs),
+                                      lambda a, path: _save_without_wall_clock(a, path, timings),
+                                      stage.artifact.load, stage.filename)
+        except findings() as error:  # a finding about the setting: kept, so a study need not run it again
+            if not self.dir.readonly:
+                write_text(self.path / FAILED, json.dumps({"stage": name, "key": normalized(stage.key),
+                                                           "error": one_line(error)}, indent=2))
+            raise
         if timings:
             self.reports.setdefault("timings", {})[name] = timings
         if stage.check is not None:
@@ -263,6 +271,8 @@ def open_run(cfg: DictConfig, method: str, plan: Callable, checks: Callable | No
                           f"recipes/{method}/train.py into it first")
     directory.acquire()
     directory.verify(specs)  # again, now that no other process can write it
+    if not directory.readonly:
+        (directory.path / FAILED).unlink(missing_ok=True)  # an earlier run's finding: this run finds again
     logger = None
     if not directory.readonly and not EVALUATE:
         info = {"method": method, "robot": get_robot(cfg.robot).reference,

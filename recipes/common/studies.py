@@ -9,7 +9,9 @@ is reported with its run directory and the others go on; the rows of every job c
 so a cluster without shared storage works too (``fetch_run_dirs=True`` also brings each run directory back). With a
 ``records`` directory (``recipes/common/records.py``) every finished job also leaves its small record there, and a
 job whose run directory is missing is taken from its record while its stage keys are today's: a study runs in parts,
-on several machines or sessions.
+on several machines or sessions. A job that ends in a finding about its setting (``recipes/common/entry.py``:
+``findings``) is not evaluable, a result rather than a failure: it is kept (``failed.json`` in its run directory and
+record) and reported from there, not run again, while the stage it failed in has today's key.
 
 Example:
     >>> jobs = [Job("lat", "outputs/lat/tiny/a1_seed0", ["preset=tiny"]), Job("lib", "outputs/lib/tiny/a1_seed0",
@@ -70,6 +72,7 @@ class JobResult:
     reused: bool = False
     error: str = ""
     source: str = ""  # the directory its rows and timings came from: the run directory, or the job's record
+    finding: bool = False  # it failed with a finding about its setting (``failed.json``): not evaluable, a result
 
     def __post_init__(self):
         self.source = self.source or self.job.run_dir
@@ -133,12 +136,32 @@ def recorded(job: Job, records: str) -> bool:
     return job_records.current(directory, job.signature(), specs)
 
 
+def found(job: Job, records: str | None = None) -> tuple[str, str] | None:
+    """The finding a job ended in (``failed.json`` in its run directory, else in its record under ``records``) while
+    the stage it failed in has today's key: ``(error, where)``, else ``None``."""
+    places = [Path(job.run_dir)] + ([job_records.record_dir(records, job.run_dir)] if records else [])
+    places = [place for place in places if (place / job_records.FAILED).is_file()]
+    if not places:
+        return None
+    try:
+        specs = planned_stages(job)
+    except Exception:  # noqa: BLE001  (a config problem: run the job, which reports it properly)
+        return None
+    for place in places:
+        error = job_records.finding(place, job.signature(), specs)
+        if error is not None:
+            return error, str(place)
+    return None
+
+
 def execute(job: Job, fetch_run_dir: bool = False) -> dict:
     """Runs one job here (in a subprocess); returns its outcome, its result rows and optionally its run directory
-    as a tar archive. This is the body of the Ray task."""
+    as a tar archive. This is the body of the Ray task. A job that ends in a finding (the recipe's ``failed.json``)
+    comes back with ``finding`` set and its record."""
     start = time.perf_counter()
     if job.reuse_from:
         _reuse_stages(job)
+    (Path(job.run_dir) / job_records.FAILED).unlink(missing_ok=True)  # only this run's finding counts
     env = {**os.environ, "OMP_NUM_THREADS": str(job.cores), "MKL_NUM_THREADS": str(job.cores),
            "WANDB_SILENT": "true"}
     log = Path(job.run_dir).parent / f"{Path(job.run_dir).name}.log"
@@ -149,8 +172,15 @@ def execute(job: Job, fetch_run_dir: bool = False) -> dict:
         code = subprocess.run(job.command(), stdout=out, stderr=subprocess.STDOUT, cwd=os.getcwd(),
                               env={**env, PARENT_PID: str(os.getpid())}).returncode
     outcome = {"ok": code == 0, "seconds": time.perf_counter() - start, "rows": [], "error": "", "archive": None,
-               "record": None}
+               "record": None, "finding": False}
     if code != 0:
+        failed = Path(job.run_dir) / job_records.FAILED
+        if failed.is_file():  # a finding: the same config fails the same way; kept with the job's signature
+            outcome["record"] = job_records.failure_of(job.run_dir, job.signature())
+            write_text(failed, outcome["record"][job_records.FAILED])
+            outcome["finding"] = True
+            outcome["error"] = json.loads(failed.read_text())["error"] + f" (log: {log})"
+            return outcome
         tail = log.read_text().strip().splitlines()[-3:]
         outcome["error"] = f"exit code {code}: " + " | ".join(tail) + f" (log: {log})"
         return outcome
@@ -311,6 +341,8 @@ def plan_text(jobs: Sequence[Job], done: dict[int, JobResult], slots: int | None
         method, _ = group(job)
         if index in done:
             state = "finished here" if done[index].source == job.run_dir else f"from its record ({done[index].source})"
+            if done[index].finding:
+                state = f"not evaluable ({done[index].source}: {done[index].error})"
             lines.append(f"| {method} | {job.run_dir} | {state} | |")
             continue
         try:
@@ -336,7 +368,9 @@ def plan_text(jobs: Sequence[Job], done: dict[int, JobResult], slots: int | None
         cell = f"about {minutes:.0f}" if minutes is not None else "?"
         lines.append(f"| {method} | {job.run_dir} | to run | {cell} |")
     left = len(jobs) - len(done)
-    summary = f"study plan: {len(jobs)} jobs, {len(done)} finished, {left} to run"
+    findings = sum(result.finding for result in done.values())
+    summary = (f"study plan: {len(jobs)} jobs, {len(done)} finished"
+               + (f" ({findings} not evaluable: a finding)" if findings else "") + f", {left} to run")
     if left > unknown:
         summary += (f": about {todo_minutes:.0f} min of compute" + (f" for {left - unknown} of them" if unknown else "")
                     + (f", about {todo_minutes / slots:.0f} min on {slots} at once" if slots else ""))
@@ -374,6 +408,11 @@ def run_jobs(jobs: Sequence[Job], *, address: str | None = None, cores_per_job: 
             source = job_records.record_dir(records, job.run_dir)
             results[index] = JobResult(job, True, job_records.rows(source), 0.0, reused=True, source=str(source))
             from_records += 1
+        elif (finding := found(job, records)) is not None:
+            error, source = finding
+            results[index] = JobResult(job, False, [], 0.0, reused=True, error=error, source=source, finding=True)
+            if source == job.run_dir and not dry_run:
+                _keep_record(records, job, job_records.failure_of(job.run_dir, job.signature()))
         else:
             todo.append(index)
     if dry_run:
@@ -381,8 +420,10 @@ def run_jobs(jobs: Sequence[Job], *, address: str | None = None, cores_per_job: 
         print(plan_text(jobs, results, slots=None if address else max(1, _available_cores() // cores),
                         records=records), flush=True)
         raise SystemExit(0)
-    line = f"study: {len(jobs)} jobs, {len(jobs) - len(todo) - from_records} reused from their run directories"
-    print(line + (f", {from_records} from their records in {records}" if records else ""), flush=True)
+    findings = sum(r.finding for r in results.values())
+    line = (f"study: {len(jobs)} jobs, {len(jobs) - len(todo) - from_records - findings} reused from their run "
+            "directories" + (f", {from_records} from their records in {records}" if records else ""))
+    print(line + (f", {findings} not evaluable (an earlier run's finding)" if findings else ""), flush=True)
     if todo:
         started_here = not ray.is_initialized()
         if started_here:
@@ -415,18 +456,19 @@ def run_jobs(jobs: Sequence[Job], *, address: str | None = None, cores_per_job: 
                 try:
                     outcome = ray.get(ref)
                 except Exception as error:  # the worker died
-                    outcome = {"ok": False, "rows": [], "seconds": 0.0, "error": str(error), "archive": None}
+                    outcome = {"ok": False, "rows": [], "seconds": 0.0, "error": str(error), "archive": None,
+                               "finding": False}
                 if outcome.get("archive") and not Path(job.run_dir).exists():
                     with tarfile.open(fileobj=io.BytesIO(outcome["archive"]), mode="r:gz") as archive:
                         archive.extractall(job.run_dir, filter="data")
                 results[index] = JobResult(job, outcome["ok"], outcome["rows"], outcome["seconds"],
-                                           error=outcome["error"])
-                if outcome["ok"]:
-                    _keep_record(records, job, outcome.get("record"))
+                                           error=outcome["error"], finding=outcome["finding"])
+                _keep_record(records, job, outcome.get("record"))
                 durations.append(outcome["seconds"])
                 finished_at = time.perf_counter()
                 if not outcome["ok"]:
-                    print(f"study: job {job.method} {job.run_dir} failed: {outcome['error']}", flush=True)
+                    said = "is not evaluable" if outcome["finding"] else "failed"
+                    print(f"study: job {job.method} {job.run_dir} {said}: {outcome['error']}", flush=True)
                 released = [i for i, after in waiting.items() if after == index]
                 for i in released:
                     del waiting[i]
@@ -463,11 +505,13 @@ def rows_of(results: Sequence[JobResult]) -> list[dict]:
 
 
 def report_failures(results: Sequence[JobResult]) -> int:
-    """Prints the failed jobs with their run directories; returns how many failed."""
-    failed = [r for r in results if not r.ok]
-    for result in failed:
-        print(f"failed: {result.job.method} in {result.job.run_dir}: {result.error}", file=sys.stderr)
-    return len(failed)
+    """Prints the failed jobs with their run directories; returns how many failed other than with a finding about
+    their setting (those are results: the job is not evaluable, and the study's tables say so)."""
+    for result in results:
+        if not result.ok:
+            said = "not evaluable" if result.finding else "failed"
+            print(f"{said}: {result.job.method} in {result.job.run_dir}: {result.error}", file=sys.stderr)
+    return sum(not r.ok and not r.finding for r in results)
 
 
 def run_here(job: Job) -> list[dict]:

@@ -54,6 +54,28 @@ def test_a_record_holds_the_small_files_and_is_current_only_with_todays_keys(tmp
     assert records.save(record, target) and not (target / "evaluation" / "stale.key.json").exists()  # whole
 
 
+def test_a_finding_is_recorded_and_holds_only_while_the_stage_it_failed_in_keeps_its_key(tmp_path):
+    signature = {"method": "lat", "overrides": ["settings=[rear_limp]"]}
+    key = {"params": {"samples": 500}, "after": {"low_level": "abc"}}
+    run = tmp_path / "outputs" / "lat" / "paper" / "a1_seed0_rear_limp"
+    run.mkdir(parents=True)
+    (run / "gait_policy.pt.key.json").write_text(json.dumps(normalized({"params": {}})))
+    (run / records.FAILED).write_text(json.dumps({"stage": "dynamics_data_rear_limp", "key": normalized(key),
+                                                  "error": "a1: 500 of 500 random actions ended in a fall"}))
+    record = records.failure_of(run, signature)
+    assert set(record) == {records.FAILED, "gait_policy.pt.key.json"}
+    target = tmp_path / "rec" / "lat" / "paper" / "a1_seed0_rear_limp"
+    records.save(record, target)
+    failing = StageSpec("dynamics_data_rear_limp", key, "dynamics_data_rear_limp.npz")
+    assert records.finding(target, signature, [failing]) == "a1: 500 of 500 random actions ended in a fall"
+    assert records.finding(run, signature, [failing]) is None  # the recipe's own file has no job signature
+    assert records.finding(target, {**signature, "overrides": []}, [failing]) is None  # another job
+    upstream_changed = StageSpec(failing.name, {**key, "after": {"low_level": "def"}}, failing.filename)
+    assert records.finding(target, signature, [upstream_changed]) is None  # a changed low level: run it again
+    assert records.finding(target, signature, []) is None  # the stage is no longer planned
+    assert not records.current(target, signature, [failing])  # not a finished job's record
+
+
 def test_a_run_directory_without_a_finished_job_has_no_record(tmp_path):
     (tmp_path / "run").mkdir()
     with pytest.raises(ValueError, match="no finished job"):
