@@ -89,13 +89,13 @@ def fault_jobs(cfg, robots) -> tuple[list, list]:
                               *cfg.method_overrides.get(method, []),
                               *cfg.profile_overrides.get(profile, {}).get(method, [])]
                     home = run_dir(method, cfg.preset_name, spec, profile, seed)
-                    labels = {"method": method, "profile": profile}
+                    labels = {"method": method, "profile": profile, "robot": spec.name}
                     paper = [s for s in settings if s in PAPER_SETTINGS] or ["normal"]
                     main.append(studies.Job(recipe, str(home), [*common, f"settings=[{','.join(paper)}]"],
-                                            labels=labels))
+                                            labels={**labels, "faults": paper}))
                     for fault in (s for s in settings if s not in paper):
                         extra.append(studies.Job(recipe, f"{home}_{fault}", [*common, f"settings=[{fault}]"],
-                                                 labels=labels, reuse_from=str(home)))
+                                                 labels={**labels, "faults": [fault]}, reuse_from=str(home)))
     return main, extra
 
 
@@ -124,6 +124,47 @@ def sample_jobs(cfg, robots) -> list:
                     if not on_disk and source == paper_run:
                         source = target  # the first count's run directory, for every later count
     return jobs
+
+
+SUMMARY_TASKS = ("velocity_tracking", "goal_reaching", "trajectory_tracking")
+
+
+def fault_summary(results, methods, seeds: int) -> str:
+    """One row per robot, profile and fault, one column per method: the normalised cost at velocity tracking (mean
+    +- std over targets and seeds) / goal reaching / trajectory tracking, and the goals reached; "not evaluable" where
+    every seed's run failed with a finding (the reason is listed below the tables), and the number of seeds where
+    fewer than ``seeds`` were evaluated."""
+    costs: dict[tuple, list] = {}
+    order: list[tuple] = []
+    for result in results:
+        labels = result.job.labels
+        for fault in labels["faults"]:
+            place = (labels["robot"], labels["profile"], fault)
+            if place not in order:
+                order.append(place)
+            cell = costs.setdefault((*place, labels["method"]), [])
+            cell += [row for row in result.rows if row["setting"] == fault] if result.ok else []
+    lines = ["| robot | profile | fault | " + " | ".join(methods) + " |", "|---|---|---|" + "---|" * len(methods)]
+    for place in order:
+        cells = []
+        for method in methods:
+            rows = costs.get((*place, method))
+            if rows is None:
+                cells.append("-")
+                continue
+            if not rows:
+                cells.append("not evaluable")
+                continue
+            per_task = {task: np.array([r["normalized_cost"] for r in rows if r["task"] == task], dtype=float)
+                        for task in SUMMARY_TASKS}
+            text = " / ".join(f"{c.mean():.2f}" + (f" +- {c.std():.2f}" if i == 0 else "") if len(c) else "-"
+                              for i, c in enumerate(per_task.values()))
+            goals = [float(r["success"]) for r in rows if r["task"] == "goal_reaching"]
+            text += f" ({100 * np.mean(goals):.0f} %)" if goals else ""
+            evaluated = len({r["seed"] for r in rows})
+            cells.append(text + (f", {evaluated} of {seeds} seeds" if evaluated < seeds else ""))
+        lines.append(f"| {' | '.join(place)} | {' | '.join(cells)} |")
+    return "\n".join(lines) + "\n"
 
 
 def _report(result) -> dict:
@@ -204,7 +245,11 @@ def main(cfg) -> None:
         notes = "".join(f"- {r.job.labels['method']} in {r.job.run_dir}: {r.error}\n" for r in unusable)
         write_text(out / "adverse.md", f"# Damage: LAT against IK under fault models ({cfg.preset_name} preset, "
                                        f"{len(cfg.seeds)} seed(s))\n\nNormalised cost, mean +- std over targets and "
-                                       "seeds; `_stiff`: under the stiff actuator profile.\n\n" + table
+                                       "seeds; cells: velocity tracking / goal reaching / trajectory tracking "
+                                       "(goals reached).\n\n"
+                                       + fault_summary(fault_results, list(cfg.methods), len(cfg.seeds))
+                                       + "\n## Every task\n\nA setting `<fault>_<profile>` ran under that actuator profile (`stiff`, `stiff_servos`).\n\n"
+                                       + table
                                        + "\n## Speeds each fault leaves (random-action dynamics data)\n\n"
                                        + achievable_speeds(fault_results)
                                        + "\n## LAT's low level: its experts reproduced in simulation\n\n"

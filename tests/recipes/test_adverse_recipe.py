@@ -35,6 +35,12 @@ def test_adverse_tiny(tmp_path):
     table = (out / "adverse.md").read_text()
     assert "| lat | a1 | own | one_leg_locked |" in table  # the speeds the fault leaves
     assert "## Runs that could not be evaluated" in table and "limp legs ['RR', 'RL']" in table
+    # the summary: one row per fault, LAT's three task costs and goals reached, or why there are none
+    assert "| a1 | own | rear_limp | not evaluable |" in table
+    legs_disabled = next(line for line in table.splitlines() if line.startswith("| a1 | own | legs_disabled | "))
+    velocity = [r["normalized_cost"] for r in rows if r["setting"] == "legs_disabled" and r["task"] ==
+                "velocity_tracking"]
+    assert legs_disabled.split(" | ")[3].startswith(f"{sum(velocity) / len(velocity):.2f} +- "), legs_disabled
     # how well LAT's low level reproduces its experts, per profile (one row per trained low level)
     low_levels = table.split("## LAT's low level: its experts reproduced in simulation")[1]
     assert low_levels.count("| a1 | own |") == 1, low_levels
