@@ -248,7 +248,8 @@ def main(cfg) -> None:
                                        "seeds; cells: velocity tracking / goal reaching / trajectory tracking "
                                        "(goals reached).\n\n"
                                        + fault_summary(fault_results, list(cfg.methods), len(cfg.seeds))
-                                       + "\n## Every task\n\nA setting `<fault>_<profile>` ran under that actuator profile (`stiff`, `stiff_servos`).\n\n"
+                                       + "\n## Every task\n\nA setting `<fault>_<profile>` ran under that "
+                                       "actuator profile (`stiff`, `stiff_servos`).\n\n"
                                        + table
                                        + "\n## Speeds each fault leaves (random-action dynamics data)\n\n"
                                        + achievable_speeds(fault_results)
