@@ -181,11 +181,12 @@ def achievable_speeds(results) -> str:
     :meth:`TransitionData.achievable_speeds`), as each job's ``report.json`` keeps it, so a job taken from its
     record has it too (for runs made before reports kept it, from the data in the run directory)."""
     lines = ["| method | robot | profile | setting | forward | backward | left | right | turn (rad/s) | transitions "
-             "dropped for falls |", "|---|---|---|---|---|---|---|---|---|---|"]
+             "dropped for falls | seed |", "|---|---|---|---|---|---|---|---|---|---|---|"]
     for result in results:
         if not result.ok or result.job.labels.get("method") not in ("lat", "ik"):
             continue
         robot = result.rows[0]["robot"] if result.rows else "?"
+        seed = result.rows[0]["seed"] if result.rows else "?"
         for name, entry in sorted(_report(result).items()):
             if not name.startswith("dynamics_data_"):
                 continue
@@ -196,7 +197,8 @@ def achievable_speeds(results) -> str:
             cells = " | ".join(f"{speeds[k]:.2f}" if speeds else "-"
                                for k in ("forward", "backward", "left", "right", "turn"))
             lines.append(f"| {result.job.labels['method']} | {robot} | {result.job.labels['profile']} | "
-                         f"{name.removeprefix('dynamics_data_')} | {cells} | {entry.get('dropped_failures', 0)} |")
+                         f"{name.removeprefix('dynamics_data_')} | {cells} | {entry.get('dropped_failures', 0)} | "
+                         f"{seed} |")
     return "\n".join(lines) + "\n"
 
 
