@@ -4,8 +4,8 @@ dynamics samples) over several trials, as jobs on Ray, then tabulate and plot.
     python recipes/ablations/run.py                    # Daisy, paper scale, 10 trials per value
     python recipes/ablations/run.py trials=3 preset=small robot=a1 run=[latent_dim]
 
-Every trial is a LAT run in ``out_dir/<ablation>_<value>/seed<trial>``, or, at the preset's own value, the trial's
-default run ``out_dir/default/seed<trial>`` that every ablation shares (finished runs are reused). Writes
+Every trial is a LAT run in ``runs_dir/<ablation>_<value>/seed<trial>``, or, at the preset's own value, the trial's
+default run ``runs_dir/default/seed<trial>`` that every ablation shares (finished runs are reused). Writes
 ``ablations.csv``, ``ablations.md``, ``wallclock.md`` and ``ablations.png`` in ``out_dir``.
 """
 
@@ -45,7 +45,7 @@ def check(cfg) -> None:
 def jobs(cfg) -> tuple[list, list]:
     """The study's jobs, and each trial as ``(labels, job index)``. A value that is the preset's own (at paper scale
     latent dimension 3, 50 experts) gives the same run whichever ablation varies it: one default run per trial, in
-    ``out_dir/default/seed<trial>``, serves them all. Every other trial starts from the stages it shares with the
+    ``runs_dir/default/seed<trial>``, serves them all. Every other trial starts from the stages it shares with the
     default run of its trial (a dynamics-sample trial: the whole low level, so only the dynamics differ)."""
     from omegaconf import OmegaConf
 
@@ -60,7 +60,7 @@ def jobs(cfg) -> tuple[list, list]:
     def default_job(trial: int) -> int:
         if trial not in default_jobs:
             default_jobs[trial] = len(planned)
-            planned.append(studies.Job("lat", str(Path(cfg.out_dir) / "default" / f"seed{trial}"),
+            planned.append(studies.Job("lat", str(Path(cfg.runs_dir) / "default" / f"seed{trial}"),
                                        [*common, f"seed={trial}"], labels={"method": "default"}))
         return default_jobs[trial]
 
@@ -73,7 +73,7 @@ def jobs(cfg) -> tuple[list, list]:
                     trials.append((labels, default_job(trial)))
                     continue
                 trials.append((labels, len(planned)))
-                planned.append(studies.Job("lat", str(Path(cfg.out_dir) / f"{name}_{value}" / f"seed{trial}"),
+                planned.append(studies.Job("lat", str(Path(cfg.runs_dir) / f"{name}_{value}" / f"seed{trial}"),
                                            [*common, f"seed={trial}", f"{spec['key']}={value}"], labels=labels,
                                            reuse_from=planned[default_job(trial)].run_dir))
     return planned, trials

@@ -6,7 +6,8 @@ and few-sample re-learning of the dynamics after damage, as jobs on Ray.
 
 Writes ``adverse.csv``, ``adverse.md`` (the table, with the speeds each fault leaves the robot: from the random-action
 dynamics data), ``samples.csv``, ``samples.png`` (cost against re-learning samples), ``wallclock.md``, and copies
-LAT's goal-reaching video under every fault to ``videos/``, in ``out_dir``.
+LAT's goal-reaching video under every fault to ``videos/``, in ``out_dir``; the few-sample runs go to
+``runs_dir/samples/<method>/<robot>_seed<seed>_n<count>`` (the fault runs to ``outputs/<method>/<preset>/``).
 """
 
 import hierloco  # noqa: F401  (first: headless MuJoCo rendering is set before anything loads MuJoCo)
@@ -114,7 +115,7 @@ def sample_jobs(cfg, robots) -> list:
                 paper_run = run_dir(method, cfg.preset_name, spec, "own", seed)
                 on_disk, source = (paper_run / studies.DONE).is_file(), paper_run
                 for count in cfg.samples:
-                    target = Path(cfg.out_dir) / "samples" / method / f"{spec.name}_seed{seed}_n{count}"
+                    target = Path(cfg.runs_dir) / "samples" / method / f"{spec.name}_seed{seed}_n{count}"
                     overrides = [f"preset={cfg.preset_name}", f"robot={spec.reference}", f"seed={seed}",
                                  "settings=[legs_disabled]", f"dynamics.num_transitions={count}", "progress=false",
                                  "eval.videos=[]", *variant, *cfg.overrides, *cfg.method_overrides.get(method, [])]

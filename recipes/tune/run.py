@@ -6,7 +6,7 @@ targets), as jobs on Ray, so that the comparison runs each baseline at its best 
     python recipes/tune/run.py robots=[daisy] seeds=[0] 'candidates={a: {overrides: []}, b: {overrides: [...]}}'
 
 Every candidate runs the method's recipe in the normal setting with every task replaced by its training split
-(``eval.tasks.<task>.split=train``), in ``out_dir/<candidate>/<robot>_seed<seed>``; a candidate with ``reuse``
+(``eval.tasks.<task>.split=train``), in ``runs_dir/<candidate>/<robot>_seed<seed>``; a candidate with ``reuse``
 starts from the finished stages ``reuse_stages`` (the candidate's own, else the study's) of
 ``outputs/<reuse>/<preset>/<robot>_seed<seed>`` (their keys are checked like any cached stage).
 What is tuned is a ``target`` (``target/<name>.yaml``): ``ik`` (default) or ``sac`` (the paper's optimiser against a
@@ -64,7 +64,7 @@ def jobs(cfg, robots) -> list:
     for spec in robots:
         for name, candidate in cfg.candidates.items():
             for seed in cfg.seeds:
-                run_dir = Path(cfg.out_dir) / name / f"{spec.name}_seed{seed}"
+                run_dir = Path(cfg.runs_dir) / name / f"{spec.name}_seed{seed}"
                 reuse = candidate.get("reuse")
                 source = str(Path("outputs") / reuse / cfg.preset_name / f"{spec.name}_seed{seed}") if reuse else None
                 overrides = [f"preset={cfg.preset_name}", f"robot={spec.reference}", f"seed={seed}",

@@ -12,10 +12,10 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_ablation_tiny(tmp_path):
-    out = tmp_path / "ablations"
+    out, runs = tmp_path / "ablations", tmp_path / "runs"
     command = [sys.executable, str(ROOT / "recipes" / "ablations" / "run.py"), "preset=tiny", "robot=a1", "trials=1",
                "run=[latent_dim,dynamics_samples]", "ablations.latent_dim.values=[2,3]",
-               "ablations.dynamics_samples.values=[100,200]", f"out_dir={out}",
+               "ablations.dynamics_samples.values=[100,200]", f"out_dir={out}", f"runs_dir={runs}",
                'overrides=["progress=false", "eval.generalization=null", "eval.videos=[]"]']
     result = subprocess.run(command, cwd=ROOT, env={**os.environ, "WANDB_MODE": "offline"}, capture_output=True,
                             text=True, timeout=600)
@@ -25,19 +25,25 @@ def test_ablation_tiny(tmp_path):
                                            "dynamics_samples=200"}
     assert (out / "ablations.png").read_bytes()[:4] == b"\x89PNG"
     # each trial is a LAT run with the value applied
-    assert "latent_dim: 3" in (out / "latent_dim_3" / "seed0" / "config.yaml").read_text()
+    assert "latent_dim: 3" in (runs / "latent_dim_3" / "seed0" / "config.yaml").read_text()
     # the tiny preset's own values (latent dimension 2, 200 samples) are one run that both ablations share
     assert "study: 3 jobs" in result.stdout, result.stdout[-2000:]
     costs = lambda method: [r["normalized_cost"] for r in rows if r["method"] == method]  # noqa: E731
     assert costs("latent_dim=2") == costs("dynamics_samples=200") and costs("latent_dim=2")
     # a dynamics-sample trial waits for its trial's default run and starts from its low level: only the dynamics
     # differ (the copied stage keeps what building it took, for the wall-clock table)
-    default, fewer = out / "default" / "seed0", out / "dynamics_samples_100" / "seed0"
+    default, fewer = runs / "default" / "seed0", runs / "dynamics_samples_100" / "seed0"
     assert (fewer / "gait_policy.pt").read_bytes() == (default / "gait_policy.pt").read_bytes()
     builds = json.loads((fewer / "builds.json").read_text())
     assert builds["gait_policy"]["copied_from"] == str(default.resolve()) and "dynamics_data_normal" in builds
     assert "copied_from" not in builds["dynamics_data_normal"]
     assert "dynamics_samples=100" in (out / "wallclock.md").read_text()
+    # the tables written elsewhere (results/...) reuse every finished trial
+    elsewhere = subprocess.run([c for c in command if not c.startswith("out_dir=")] + [
+        f"out_dir={tmp_path / 'elsewhere'}"], cwd=ROOT, env={**os.environ, "WANDB_MODE": "offline"},
+        capture_output=True, text=True, timeout=600)
+    assert elsewhere.returncode == 0 and "study: 3 jobs, 3 reused" in elsewhere.stdout, elsewhere.stdout[-2000:]
+    assert (tmp_path / "elsewhere" / "ablations.csv").read_text() == (out / "ablations.csv").read_text()
 
 
 def test_unknown_ablation_is_refused(tmp_path):

@@ -30,6 +30,7 @@ def test_adverse_tiny(tmp_path):
     assert "ended in a fall" in result.stderr
     failure = json.loads((tmp_path / "records" / "lat" / "tiny" / "a1_seed0_rear_limp" / "failed.json").read_text())
     assert failure["stage"] == "dynamics_data_rear_limp" and "ended in a fall" in failure["error"]
+    runs = tmp_path / "outputs" / "adverse" / "tiny"  # the few-sample runs: in runs_dir, whatever out_dir is
     rows = read_csv(out / "adverse.csv")
     assert {r["setting"] for r in rows} == {"normal", "legs_disabled", "one_leg_locked"}
     table = (out / "adverse.md").read_text()
@@ -46,23 +47,28 @@ def test_adverse_tiny(tmp_path):
     assert low_levels.count("| a1 | own |") == 1, low_levels
     # the per-method overrides reach every run of that method
     assert all("checks.min_expert_reach=0.3" in log.read_text() for log in
-               [tmp_path / "outputs" / "lat" / "tiny" / "a1_seed0.log", out / "samples" / "lat" / "a1_seed0_n50.log"])
+               [tmp_path / "outputs" / "lat" / "tiny" / "a1_seed0.log", runs / "samples" / "lat" / "a1_seed0_n50.log"])
     assert {p.name for p in (out / "videos").iterdir()} == {f"a1_seed0_{s}_goal_reaching.mp4" for s in
                                                             ("normal", "legs_disabled", "one_leg_locked")}
     samples = read_csv(out / "samples.csv")
     assert {r["setting"] for r in samples} == {"legs_disabled"} and {int(r["samples"]) for r in samples} == {50, 200}
     trained = tmp_path / "outputs" / "lat" / "tiny" / "a1_seed0"
-    reused = out / "samples" / "lat" / "a1_seed0_n50"
+    reused = runs / "samples" / "lat" / "a1_seed0_n50"
     assert (reused / "gait_policy.pt").read_bytes() == (trained / "gait_policy.pt").read_bytes()
     assert (reused / "dynamics_data_legs_disabled.npz").read_bytes() != (
         trained / "dynamics_data_legs_disabled.npz").read_bytes()
     # at the run's own count (the tiny preset's 200) the re-learned dynamics are the run's: taken, not built again
-    same = out / "samples" / "lat" / "a1_seed0_n200"
+    same = runs / "samples" / "lat" / "a1_seed0_n200"
     assert (same / "dynamics_data_legs_disabled.npz").read_bytes() == (
         trained / "dynamics_data_legs_disabled.npz").read_bytes()
     cost = lambda of: sorted(r["normalized_cost"] for r in of if r["setting"] == "legs_disabled")  # noqa: E731
     assert cost(r for r in samples if int(r["samples"]) == 200) == cost(rows)
     assert (out / "samples.png").read_bytes()[:4] == b"\x89PNG"
+    # the tables written elsewhere (results/...) reuse every finished run: nothing to run
+    elsewhere = subprocess.run([c for c in command if not c.startswith("out_dir=")] + [
+        f"out_dir={tmp_path / 'elsewhere'}", "dry_run=true"], cwd=tmp_path, env={**os.environ, "WANDB_MODE": "offline"},
+        capture_output=True, text=True, timeout=600)
+    assert "5 jobs, 5 finished (1 not evaluable: a finding), 0 to run" in elsewhere.stdout, elsewhere.stdout[-2000:]
 
 
     # a later session with the records alone (no run directory): the same speeds and low-level checks, from each

@@ -27,7 +27,7 @@ def test_tune_ik_tiny(tmp_path):
     source = finished_run(tmp_path, "ik", env)  # a finished IK run the integral candidate reuses
     out = tmp_path / "out"
     result = subprocess.run([sys.executable, str(ROOT / "recipes" / "tune" / "run.py"), "preset=tiny", "robots=[a1]",
-                             "seeds=[0]", f"out_dir={out}"], cwd=tmp_path, env=env, capture_output=True, text=True,
+                             "seeds=[0]", f"out_dir={out}", f"runs_dir={out}"], cwd=tmp_path, env=env, capture_output=True, text=True,
                             timeout=900)
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
     rows = read_csv(out / "tune.csv")
@@ -48,7 +48,7 @@ def test_tune_sac_tiny_reuses_the_comparison_agents_for_the_paper_candidate(tmp_
     source = finished_run(tmp_path, "sac", env)  # the comparison's SAC run
     out = tmp_path / "out"
     result = subprocess.run([sys.executable, str(ROOT / "recipes" / "tune" / "run.py"), "target=sac", "preset=tiny",
-                             "robots=[a1]", "seeds=[0]", f"out_dir={out}"], cwd=tmp_path, env=env,
+                             "robots=[a1]", "seeds=[0]", f"out_dir={out}", f"runs_dir={out}"], cwd=tmp_path, env=env,
                             capture_output=True, text=True, timeout=900)
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
     rows = read_csv(out / "tune.csv")
