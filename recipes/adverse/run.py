@@ -145,6 +145,8 @@ def fault_summary(results, methods, seeds: int) -> str:
                 order.append(place)
             cell = costs.setdefault((*place, labels["method"]), [])
             cell += [row for row in result.rows if row["setting"] == fault] if result.ok else []
+    seen = [list(dict.fromkeys(place[k] for place in order)) for k in range(3)]  # robots, profiles, faults in order
+    order.sort(key=lambda place: tuple(seen[k].index(place[k]) for k in range(3)))
     lines = ["| robot | profile | fault | " + " | ".join(methods) + " |", "|---|---|---|" + "---|" * len(methods)]
     for place in order:
         cells = []
