@@ -72,10 +72,11 @@ def jobs(cfg) -> tuple[list, list]:
                 if value == OmegaConf.select(defaults, spec["key"]):
                     trials.append((labels, default_job(trial)))
                     continue
+                source = planned[default_job(trial)].run_dir  # first: it may add the trial's default job
                 trials.append((labels, len(planned)))
                 planned.append(studies.Job("lat", str(Path(cfg.runs_dir) / f"{name}_{value}" / f"seed{trial}"),
                                            [*common, f"seed={trial}", f"{spec['key']}={value}"], labels=labels,
-                                           reuse_from=planned[default_job(trial)].run_dir))
+                                           reuse_from=source))
     return planned, trials
 
 
