@@ -55,11 +55,7 @@ def record_dir(records: str | os.PathLike, run_dir: str | os.PathLike) -> Path:
 def files_of(run_dir: str | os.PathLike) -> dict[str, str]:
     """The record of a finished job: its files' paths (relative to the run directory) -> text."""
     run_dir = Path(run_dir)
-    paths = [run_dir / name for name in FILES] + sorted(run_dir.rglob(KEYS))
-    record = {}
-    for path in paths:
-        if path.is_file() and path.stat().st_size <= MAX_BYTES:
-            record[path.relative_to(run_dir).as_posix()] = path.read_text()
+    record = _small_files(run_dir, [run_dir / name for name in FILES] + sorted(run_dir.rglob(KEYS)))
     if "job.json" not in record or "episodes.csv" not in record:
         raise ValueError(f"{run_dir} holds no finished job (job.json and episodes.csv)")
     return record
@@ -70,11 +66,13 @@ def failure_of(run_dir: str | os.PathLike, signature: dict) -> dict[str, str]:
     that file with the job's ``signature`` added, and the keys of the stages it finished."""
     run_dir = Path(run_dir)
     failure = json.loads((run_dir / FAILED).read_text())
-    record = {FAILED: json.dumps({"signature": signature, **failure}, indent=2)}
-    for path in sorted(run_dir.rglob(KEYS)):
-        if path.is_file() and path.stat().st_size <= MAX_BYTES:
-            record[path.relative_to(run_dir).as_posix()] = path.read_text()
-    return record
+    return {FAILED: json.dumps({"signature": signature, **failure}, indent=2),
+            **_small_files(run_dir, sorted(run_dir.rglob(KEYS)))}
+
+
+def _small_files(run_dir: Path, paths) -> dict[str, str]:
+    return {path.relative_to(run_dir).as_posix(): path.read_text() for path in paths
+            if path.is_file() and path.stat().st_size <= MAX_BYTES}
 
 
 def finding(directory: str | os.PathLike, signature: dict, specs: Iterable[StageSpec]) -> str | None:

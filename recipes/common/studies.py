@@ -177,9 +177,9 @@ def execute(job: Job, fetch_run_dir: bool = False) -> dict:
         failed = Path(job.run_dir) / job_records.FAILED
         if failed.is_file():  # a finding: the same config fails the same way; kept with the job's signature
             outcome["record"] = job_records.failure_of(job.run_dir, job.signature())
-            write_text(failed, outcome["record"][job_records.FAILED])
-            outcome["finding"] = True
-            outcome["error"] = json.loads(failed.read_text())["error"] + f" (log: {log})"
+            text = outcome["record"][job_records.FAILED]
+            write_text(failed, text)
+            outcome.update(finding=True, error=json.loads(text)["error"] + f" (log: {log})")
             return outcome
         tail = log.read_text().strip().splitlines()[-3:]
         outcome["error"] = f"exit code {code}: " + " | ".join(tail) + f" (log: {log})"
