@@ -14,7 +14,7 @@ ROOT = Path(__file__).resolve().parents[2]
 def test_ablation_tiny(tmp_path):
     out, runs = tmp_path / "ablations", tmp_path / "runs"
     command = [sys.executable, str(ROOT / "recipes" / "ablations" / "run.py"), "preset=tiny", "robot=a1", "trials=1",
-               "run=[latent_dim,dynamics_samples]", "ablations.latent_dim.values=[2,3]",
+               "run=[latent_dim,dynamics_samples]", "ablations.latent_dim.values=[3,2]",
                "ablations.dynamics_samples.values=[100,200]", f"out_dir={out}", f"runs_dir={runs}",
                'overrides=["progress=false", "eval.generalization=null", "eval.videos=[]"]']
     result = subprocess.run(command, cwd=ROOT, env={**os.environ, "WANDB_MODE": "offline"}, capture_output=True,
@@ -30,6 +30,11 @@ def test_ablation_tiny(tmp_path):
     assert "study: 3 jobs" in result.stdout, result.stdout[-2000:]
     costs = lambda method: [r["normalized_cost"] for r in rows if r["method"] == method]  # noqa: E731
     assert costs("latent_dim=2") == costs("dynamics_samples=200") and costs("latent_dim=2")
+    # every trial's rows are its own run's episodes, also for a first value that is not the default (its trial's
+    # default run is planned while the trial is: the rows must not be the default run's)
+    own = lambda run: [r["normalized_cost"] for r in read_csv(runs / run / "seed0" / "episodes.csv")]  # noqa: E731
+    assert costs("latent_dim=3") == own("latent_dim_3") != own("default")
+    assert costs("dynamics_samples=100") == own("dynamics_samples_100")
     # a dynamics-sample trial waits for its trial's default run and starts from its low level: only the dynamics
     # differ (the copied stage keeps what building it took, for the wall-clock table)
     default, fewer = runs / "default" / "seed0", runs / "dynamics_samples_100" / "seed0"
