@@ -6,7 +6,9 @@ dynamics samples) over several trials, as jobs on Ray, then tabulate and plot.
 
 Every trial is a LAT run in ``runs_dir/<ablation>_<value>/seed<trial>``, or, at the preset's own value, the trial's
 default run ``runs_dir/default/seed<trial>`` that every ablation shares (finished runs are reused). Writes
-``ablations.csv``, ``ablations.md``, ``wallclock.md`` and ``ablations.png`` in ``out_dir``.
+``ablations.csv``, ``ablations.md``, ``wallclock.md``, ``ablations.png`` and ``paper_check.md`` (the paper's ablation
+claims beside our numbers, ``paper_check.py``; each claim that does not hold with the cause we checked, from the YAML
+file ``causes``) in ``out_dir``.
 """
 
 import hierloco  # noqa: F401  (first: headless MuJoCo rendering is set before anything loads MuJoCo)
@@ -17,6 +19,7 @@ from pathlib import Path
 from hierloco.io import write_text
 from hierloco.plots import plot_ablations
 from hierloco.results import EPISODE_COLUMNS, csv_text, markdown_table
+from recipes.ablations import paper_check
 from recipes.common import studies
 from recipes.common.config import ConfigError, as_lists
 from recipes.common.entry import recipe_main
@@ -36,6 +39,11 @@ def check(cfg) -> None:
     for name, spec in cfg.ablations.items():
         if "key" not in spec or not spec.get("values"):
             problems.append(f"ablation {name!r} needs a key and a list of values")
+    if cfg.causes is not None:
+        try:
+            paper_check.load_causes(cfg.causes)
+        except ValueError as error:
+            problems.append(str(error))
     problems += [f"unknown ablation {name!r} in run (ablations: {', '.join(cfg.ablations)})" for name in cfg.run
                  if name not in cfg.ablations]
     if problems:
@@ -101,8 +109,12 @@ def main(cfg) -> None:
                                          "trials per value)\n\nNormalised cost, mean +- std over targets and trials."
                                          "\n\n" + table)
         plot_ablations(per_value, out / "ablations.png", title=f"LAT ablations on {cfg.robot} ({cfg.trials} trials)")
+        causes = paper_check.load_causes(cfg.causes) if cfg.causes is not None else []
+        write_text(out / "paper_check.md", paper_check.paper_check_markdown(
+            paper_check.check_claims(rows), title=f"LAT ablations, {cfg.preset_name} preset, {cfg.trials} trials per "
+                                                  "value (a trial's seed is its index)", causes=causes))
         print("\n" + table)
-        print(f"ablation table and figure in {out}/")
+        print(f"ablation table, figure and the paper's claims checked (paper_check.md) in {out}/")
     if studies.report_failures(results):
         sys.exit(1)
 

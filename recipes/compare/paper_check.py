@@ -165,9 +165,10 @@ class Cause:
                 and (not self.tasks or check.task in self.tasks))
 
 
-def load_causes(path) -> list[Cause]:
+def load_causes(path, claims: tuple[str, ...] = CLAIMS) -> list[Cause]:
     """The causes in the YAML file ``path``: a list of ``{claims: [...], robots: [...], tasks: [...], cause: text}``
-    (``robots`` and ``tasks`` optional). Raises ValueError naming every malformed entry.
+    (``robots`` and ``tasks`` optional), each claim one of ``claims`` (the keys of the checks the causes are for).
+    Raises ValueError naming every malformed entry.
 
         >>> import tempfile
         >>> f = tempfile.NamedTemporaryFile("w", suffix=".yaml", delete=False)
@@ -199,8 +200,8 @@ def load_causes(path) -> list[Cause]:
         problems += [f"{where}: unknown fields {unknown} (claims, robots, tasks, cause)"] if unknown else []
         problems += [f"{where}: {name} must be a list of names" for name in bad]
         if not bad:
-            problems += [f"{where}: unknown claim {c!r} ({', '.join(CLAIMS)})" for c in lists["claims"]
-                         if c not in CLAIMS]
+            problems += [f"{where}: unknown claim {c!r} ({', '.join(claims)})" for c in lists["claims"]
+                         if c not in claims]
             problems += [f"{where}: unknown task {t!r} ({', '.join(TASKS)})" for t in lists["tasks"] if t not in TASKS]
             problems += [f"{where}: claims is empty"] if not lists["claims"] else []
         problems += [f"{where}: cause must be a non-empty text"] if not (isinstance(text, str) and text.strip()) else []
@@ -212,9 +213,15 @@ def load_causes(path) -> list[Cause]:
     return causes
 
 
-def paper_check_markdown(checks: list[Check], *, title: str, causes: list[Cause] = ()) -> str:
+CRITERIA = (f"\"Close\" means LAT's mean at most {CLOSE} above IK's; \"better\", \"worse\" and \"best\" mean by more "
+            f"than {TIE}.")
+
+
+def paper_check_markdown(checks: list[Check], *, title: str, causes: list[Cause] = (), criteria: str = CRITERIA,
+                         paper_column: str = "paper (numbers it states; A1 only)") -> str:
     """The checks as a Markdown page (``paper_check.md``), each claim that does not hold with its numbered cause
-    from ``causes`` (the first that covers it) or "not checked"."""
+    from ``causes`` (the first that covers it) or "not checked". ``criteria`` says what the verdicts mean;
+    ``paper_column`` heads the column of what the paper says."""
     numbers: dict[Cause, int] = {}
 
     def cause_of(check: Check) -> str:
@@ -226,9 +233,8 @@ def paper_check_markdown(checks: list[Check], *, title: str, causes: list[Cause]
         return f"[{numbers.setdefault(cause, len(numbers) + 1)}](#cause-{numbers[cause]})"
 
     lines = [f"# The paper's claims, checked\n\n{title}. Normalised cost, mean +- std over seeds (each seed's mean "
-             f"over its targets); a fallen robot's cost counts as 1. \"Close\" means LAT's mean at most {CLOSE} "
-             f"above IK's; \"better\", \"worse\" and \"best\" mean by more than {TIE}.\n",
-             "| claim | robot | setting | task | ours | paper (numbers it states; A1 only) | verdict | cause |",
+             f"over its targets); a fallen robot's cost counts as 1. {criteria}\n",
+             f"| claim | robot | setting | task | ours | {paper_column} | verdict | cause |",
              "|---|---|---|---|---|---|---|---|"]
     lines += [f"| {c.claim} | {c.robot} | {c.setting} | {c.task} | {c.ours} | {c.paper} | {c.verdict} | "
               f"{cause_of(c)} |" for c in checks]

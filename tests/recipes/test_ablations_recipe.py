@@ -24,6 +24,10 @@ def test_ablation_tiny(tmp_path):
     assert {r["method"] for r in rows} == {"latent_dim=2", "latent_dim=3", "dynamics_samples=100",
                                            "dynamics_samples=200"}
     assert (out / "ablations.png").read_bytes()[:4] == b"\x89PNG"
+    # the paper's claims, checked where the study measured them (latent dimension 2 and 3 only here)
+    check = (out / "paper_check.md").read_text()
+    assert "| latent dimension 2, 3, 4: no significant effect | a1 | normal | goal_reaching | 2: " in check
+    assert "| 30 experts better than 10 | a1 | normal | goal_reaching | - |" in check and "| not measured |" in check
     # each trial is a LAT run with the value applied
     assert "latent_dim: 3" in (runs / "latent_dim_3" / "seed0" / "config.yaml").read_text()
     # the tiny preset's own values (latent dimension 2, 200 samples) are one run that both ablations share
@@ -55,3 +59,11 @@ def test_unknown_ablation_is_refused(tmp_path):
     command = [sys.executable, str(ROOT / "recipes" / "ablations" / "run.py"), "run=[magic]", f"out_dir={tmp_path}"]
     result = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert result.returncode != 0 and "unknown ablation" in result.stderr
+
+
+def test_a_missing_causes_file_is_refused_before_any_run(tmp_path):
+    command = [sys.executable, str(ROOT / "recipes" / "ablations" / "run.py"), f"causes={tmp_path / 'nope.yaml'}",
+               f"out_dir={tmp_path / 'out'}", f"runs_dir={tmp_path / 'runs'}"]
+    result = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert result.returncode != 0 and "causes: no file" in result.stderr
+    assert not (tmp_path / "runs").exists() and not (tmp_path / "out").exists()
