@@ -155,6 +155,16 @@ def _reuse_word(result, source: str) -> str:
     return "yes" if source == result.job.run_dir else "from its record"
 
 
+def _robot_name(job) -> str:
+    """The robot a job's run is on, for the compute table: its run directory's ``<robot>_seed<N>`` name (with a
+    profile: ``a1-stiff``), else its ``robot=`` override (a YAML robot by its file's stem)."""
+    name = Path(job.run_dir).name
+    if "_seed" in name:
+        return name.rsplit("_seed", 1)[0]
+    robot = next((o.split("=", 1)[1] for o in reversed(job.overrides) if o.startswith("robot=")), "-")
+    return Path(robot).stem if robot.endswith((".yaml", ".yml")) else robot
+
+
 def wallclock_markdown(results) -> str:
     """``wallclock.md``: each job's wall-clock in this study and the compute its stages took when they were built
     (reused stages included), then the compute per method and robot, and what that is on the study's cores."""
@@ -173,7 +183,7 @@ def wallclock_markdown(results) -> str:
         missing = sum(v is None for v in stages.values())
         threads = sorted({b.get("threads") for n, b in builds.items() if n in stages and b.get("threads")})
         compute = sum(known) if stages else float("nan")
-        robot = Path(result.job.run_dir).name.rsplit("_seed", 1)[0]
+        robot = _robot_name(result.job)
         if stages and not missing:
             per_method.setdefault((method, robot), []).append(compute)
         lines.append(f"| {method} | {source} | {seconds / 60:.1f} | {compute / 60:.1f} | "

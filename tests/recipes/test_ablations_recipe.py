@@ -46,7 +46,7 @@ def test_ablation_tiny(tmp_path):
     builds = json.loads((fewer / "builds.json").read_text())
     assert builds["gait_policy"]["copied_from"] == str(default.resolve()) and "dynamics_data_normal" in builds
     assert "copied_from" not in builds["dynamics_data_normal"]
-    assert "dynamics_samples=100" in (out / "wallclock.md").read_text()
+    assert "| dynamics_samples=100 | a1 | 1 |" in (out / "wallclock.md").read_text()  # compute per value and robot
     # the tables written elsewhere (results/...) reuse every finished trial
     elsewhere = subprocess.run([c for c in command if not c.startswith("out_dir=")] + [
         f"out_dir={tmp_path / 'elsewhere'}"], cwd=ROOT, env={**os.environ, "WANDB_MODE": "offline"},
