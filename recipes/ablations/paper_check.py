@@ -1,4 +1,4 @@
-"""The paper's ablation claims (Li et al., Sec. IV-D) checked against an ablation study's rows.
+"""The paper's ablation claims (Li et al., Sec. IV-E) checked against an ablation study's rows.
 
 The paper varies one setting at a time on Daisy, 10 trials per value, and states: the latent dimension (2, 3, 4)
 has "no significant effect"; with more experts (10, 30, 50) "the performance on each task improves, though the
@@ -103,4 +103,4 @@ def load_causes(path) -> list[paper_check.Cause]:
 def paper_check_markdown(checks: list[Check], *, title: str, causes=()) -> str:
     """The checks as ``paper_check.md``: the paper's words beside our numbers (value: mean +- std over trials)."""
     return paper_check.paper_check_markdown(checks, title=title, causes=causes, criteria=CRITERIA,
-                                            paper_column="the paper (Sec. IV-D)")
+                                            paper_column="the paper (Sec. IV-E)")

@@ -1,4 +1,4 @@
-"""LAT ablations (Li et al., RA-L 2021, Sec. IV-D): vary one setting at a time (latent dimension, number of experts,
+"""LAT ablations (Li et al., RA-L 2021, Sec. IV-E): vary one setting at a time (latent dimension, number of experts,
 dynamics samples) over several trials, as jobs on Ray, then tabulate and plot.
 
     python recipes/ablations/run.py                    # Daisy, paper scale, 10 trials per value
