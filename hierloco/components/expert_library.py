@@ -127,9 +127,36 @@ def action_motion(com_states: np.ndarray, duration: float) -> tuple[np.ndarray, 
     return np.concatenate([dxy, dyaw[..., None]], -1), dxy / duration, dyaw / duration
 
 
-def sample_commands(robot: RobotSpec, num: int, rng: np.random.Generator) -> np.ndarray:
-    """``num x 3`` commands uniform in the robot's command box."""
-    return rng.uniform(robot.command_low, robot.command_high, size=(num, 3))
+def command_box(robot: RobotSpec, command_low=None, command_high=None) -> tuple[np.ndarray, np.ndarray]:
+    """The box ``(low, high)``, each ``3`` ``(vx m/s, vy m/s, yaw_rate rad/s)``, that experts' commands are sampled
+    in: the robot's own, or a box of one's own (each bound a list of 3 numbers, ``low <= high``; an axis with
+    ``low == high`` holds that command fixed, e.g. experts that do not turn). Raises ValueError naming the problem.
+
+        >>> from hierloco.envs.robots import get_robot
+        >>> command_box(get_robot("daisy"), command_high=[0.3, 0.3, 0.0], command_low=[-0.3, -0.3, 0.0])[1].tolist()
+        [0.3, 0.3, 0.0]
+    """
+    box = []
+    for name, given, own in (("command_low", command_low, robot.command_low),
+                             ("command_high", command_high, robot.command_high)):
+        try:
+            bound = np.asarray(own if given is None else given, float)
+        except (TypeError, ValueError):
+            raise ValueError(f"{name} must be 3 numbers (vx m/s, vy m/s, yaw_rate rad/s), got {given!r}") from None
+        if bound.shape != (3,) or not np.isfinite(bound).all():
+            raise ValueError(f"{name} must be 3 finite numbers (vx m/s, vy m/s, yaw_rate rad/s), got {given!r}")
+        box.append(bound)
+    low, high = box
+    if (low > high).any():
+        raise ValueError(f"command_low {low.tolist()} must be at most command_high {high.tolist()} on every axis")
+    return low, high
+
+
+def sample_commands(robot: RobotSpec, num: int, rng: np.random.Generator, command_low=None,
+                    command_high=None) -> np.ndarray:
+    """``num x 3`` commands uniform in the robot's command box (or the box given, see :func:`command_box`)."""
+    low, high = command_box(robot, command_low, command_high)
+    return rng.uniform(low, high, size=(num, 3))
 
 
 def build_expert_library(
@@ -141,6 +168,8 @@ def build_expert_library(
     settle_time: float = 3.0,
     disabled_legs: Sequence[str] = (),
     commands: np.ndarray | None = None,
+    command_low: Sequence[float] | None = None,
+    command_high: Sequence[float] | None = None,
     max_rounds: int = 5,
     progress: bool = True,
 ) -> ExpertLibrary:
@@ -151,8 +180,11 @@ def build_expert_library(
             periods.
         settle_time: s of closed-loop walking before recording (rounded up to whole gait periods).
         commands: ``G x 3`` commands to use instead of sampling them (e.g. for tests).
+        command_low, command_high: the box the commands are sampled in (default the robot's; see
+            :func:`command_box`); the library records it, and its tracking is checked against it.
     """
     robot = get_robot(robot)
+    low, high = command_box(robot, command_low, command_high)
     if int(num_experts) < 1:
         raise ValueError(f"num_experts must be at least 1, got {num_experts}")
     periods = steps_per_action * CONTROL_TIMESTEP / robot.gait_period
@@ -160,7 +192,7 @@ def build_expert_library(
         raise ValueError(f"steps_per_action={steps_per_action} ({steps_per_action * CONTROL_TIMESTEP:.2f} s) must "
                          f"hold a whole number of {robot.name}'s {robot.gait_period} s gait periods")
     rng = np.random.default_rng(seed)
-    wanted = sample_commands(robot, num_experts, rng) if commands is None else np.asarray(commands, float)
+    wanted = sample_commands(robot, num_experts, rng, low, high) if commands is None else np.asarray(commands, float)
     if wanted.shape != (num_experts, 3):
         raise ValueError(f"commands must be {num_experts} x 3, got {wanted.shape}")
     period_steps = int(round(robot.gait_period / CONTROL_TIMESTEP))
@@ -184,7 +216,7 @@ def build_expert_library(
         rejected += int((~ok).sum())
         if ok.all():
             break
-        pending = sample_commands(robot, int((~ok).sum()), rng)
+        pending = sample_commands(robot, int((~ok).sum()), rng, low, high)
     bar.close()
     if len(records) < num_experts:
         raise RuntimeError(f"{robot.name}: only {len(records)} of {num_experts} experts walked without falling")
@@ -196,7 +228,7 @@ def build_expert_library(
         "steps_per_action": int(steps_per_action), "gait_period": robot.gait_period,
         "seed": int(seed), "settle_time": settle_steps * CONTROL_TIMESTEP, "disabled_legs": list(disabled_legs),
         "joint_names": list(robot.joint_names), "rejected_commands": rejected,
-        "command_low": list(robot.command_low), "command_high": list(robot.command_high),
+        "command_low": low.tolist(), "command_high": high.tolist(),
     }
     library = ExpertLibrary(commands=cmds, joint_targets=targets, com_states=states, foot_contacts=contacts,
                             velocity_local=velocity, yaw_rate=yaw_rate, displacement_local=displacement,
@@ -440,5 +472,5 @@ def require_expert_library_quality(library: ExpertLibrary, *, robot: str | Robot
 
 
 __all__ = ["AxisTracking", "ExpertLibrary", "ExpertQualityError", "ExpertTrackingReport", "MIN_REACH",
-           "action_motion", "build_expert_library", "diagnose_expert_library", "replay",
+           "action_motion", "build_expert_library", "command_box", "diagnose_expert_library", "replay",
            "require_expert_library_quality", "sample_commands"]

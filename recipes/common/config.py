@@ -179,6 +179,15 @@ def check_experts(c: Checker, robot, *, library: bool = True) -> None:
     if library:
         c.integer("experts.num_experts")
         c.positive("experts.settle_time")
+        box = {k: get(c.cfg, f"experts.{k}") for k in ("command_low", "command_high")}
+        if robot is not None and any(v is not None for v in box.values()):
+            from hierloco.components.expert_library import command_box
+
+            try:
+                command_box(robot, *(OmegaConf.to_container(v) if isinstance(v, ListConfig) else v
+                                     for v in box.values()))
+            except ValueError as error:
+                c.fail(f"experts: {error}")
     c.integer("steps_per_action")
     steps = get(c.cfg, "steps_per_action")
     if robot is not None and _is_int(steps) and steps >= 1:

@@ -100,7 +100,9 @@ def build_experts(run, params) -> ExpertLibrary:
     with warnings.catch_warnings():  # check_experts raises with the same diagnosis, in one line
         warnings.filterwarnings("ignore", message=".*do not walk as commanded", category=RuntimeWarning)
         return build_expert_library(run.robot, params["num_experts"], steps_per_action=params["steps_per_action"],
-                                    seed=params["seed"], settle_time=params["settle_time"], progress=run.progress)
+                                    seed=params["seed"], settle_time=params["settle_time"],
+                                    command_low=params.get("command_low"), command_high=params.get("command_high"),
+                                    progress=run.progress)
 
 
 def check_experts(run, library: ExpertLibrary) -> None:

@@ -88,6 +88,20 @@ def test_corrupted_library_is_refused(library, tmp_path):
         ExpertLibrary.load(tmp_path / "missing.npz")
 
 
+def test_experts_in_a_box_of_ones_own_walk_as_commanded():
+    """Experts that do not turn: the yaw-rate axis held at 0; the library records the box and is checked on it."""
+    lib = build_expert_library("daisy", NUM_EXPERTS, seed=0, settle_time=TINY_SETTLE_TIME, progress=False,
+                               command_low=[-0.3, -0.3, 0.0], command_high=[0.3, 0.3, 0.0])
+    assert np.all(lib.commands[:, 2] == 0.0) and np.ptp(lib.commands[:, 0]) > 0.1
+    assert lib.metadata["command_low"] == [-0.3, -0.3, 0.0] and lib.metadata["command_high"] == [0.3, 0.3, 0.0]
+    assert np.abs(lib.yaw_rate).max() < 0.1  # rad/s: they walk without turning
+    require_expert_library_quality(lib)  # vx and vy reach the box's edges; yaw does not vary, so is not assessed
+    for low, high, problem in (([0.3, 0.0, 0.0], [-0.3, 0.0, 0.0], "at most command_high"),
+                               ([0.1, 0.1], None, "3 finite numbers"), (["x", 0, 0], None, "3 numbers")):
+        with pytest.raises(ValueError, match=problem):
+            build_expert_library("daisy", 2, command_low=low, command_high=high, progress=False)
+
+
 def test_action_must_hold_whole_gait_periods():
     with pytest.raises(ValueError, match="whole number"):
         build_expert_library("daisy", 2, steps_per_action=150, progress=False)

@@ -30,6 +30,8 @@ MISTAKES = [
     ("+hardware.servo_latency=0.03", "no setting simulates the hardware robot"),
     ("+eval.tasks.goal_reaching.split=half", "split must be all or train, got 'half'"),
     ("checks.min_expert_reach=0", "checks.min_expert_reach must be a number in (0, 1], got 0"),
+    ("+experts.command_low=[0.5,0,0]", "experts: command_low [0.5, 0.0, 0.0] must be at most command_high"),
+    ("+experts.command_high=[1,2]", "experts: command_high must be 3 finite numbers"),
     ("checks.min_reproduced_fraction=1.5", "checks.min_reproduced_fraction must be a number in [0, 1], got 1.5"),
 ]
 
