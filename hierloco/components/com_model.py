@@ -381,5 +381,39 @@ def train_com_model(
     return TrainedCoMModel(model, metadata)
 
 
+def prediction_errors(model: CoMDynamicsModel, com_states, actions) -> torch.Tensor:
+    """How wrong ``model`` was about the actions that were taken: predicted minus actual delta, ``E x T x 5``.
+
+    Args:
+        model: the CoM model (its inputs are the actions' features: a latent z as it is, an expert index one-hot,
+            :meth:`hierloco.envs.low_level.LowLevel.action_features`).
+        com_states: ``E x (T + 1) x 5`` world CoM states at the start of each action and after the last, e.g.
+            ``rollout.result.com_states`` of an MPC episode (:func:`hierloco.components.evaluation.run_task`).
+        actions: ``E x T x A`` the features of the actions taken between them.
+
+    Returns:
+        ``(dx, dy, dyaw, vx', vy')`` errors in each action's start frame (m, rad wrapped to (-pi, pi], m/s): on a
+        planner's chosen actions, compare them with the held-out errors on random actions (``heldout_rmse`` in
+        the model's metadata) to see whether the plans exploit what the model gets wrong.
+
+    Example:
+        >>> model = CoMDynamicsModel(action_dim=2, hidden=8)
+        >>> prediction_errors(model, torch.zeros(3, 5, 5), torch.zeros(3, 4, 2)).shape
+        torch.Size([3, 4, 5])
+    """
+    states = _as_float_tensor(com_states)
+    _check_last_dim("com_states", states, 5)
+    actions = _as_float_tensor(actions)
+    if states.dim() != 3 or actions.dim() != 3 or actions.shape[:2] != (states.shape[0], states.shape[1] - 1):
+        raise ValueError(f"com_states must be E x (T + 1) x 5 and actions E x T x A, got {tuple(states.shape)} and "
+                         f"{tuple(actions.shape)}")
+    velocity_local, actual = local_transition(states[:, :-1], states[:, 1:])
+    with torch.no_grad():
+        predicted = model(velocity_local, actions).to(actual.dtype)
+    error = predicted - actual
+    error[..., 2] = wrap_angle(error[..., 2])
+    return error
+
+
 __all__ = ["CoMDynamicsModel", "TrainedCoMModel", "apply_delta", "holdout_split", "local_transition",
-           "train_com_model"]
+           "prediction_errors", "train_com_model"]

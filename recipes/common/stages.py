@@ -225,19 +225,27 @@ def evaluation_stage(cfg, name: str, spec: dict, setting: str, model: Stage, low
 def build_evaluation(run, params, make_low_level, model: TrainedCoMModel) -> TaskEvaluation:
     """Closed-loop MPC on every episode of a task, one robot per episode, re-planning after every action."""
     task = make_task_from_spec(params["task_name"], params["task"])
-    low = make_low_level(task.num_episodes)
-    world_model = make_world_model(model.model, low, device=params["device"])
-    planner = make_planner(world_model, seed=params["seed"], **params["planner"])
-    locked, limp = fault_legs(run.robot, params["setting"])
-    env = LatentActionEnv(low, num_robots=task.num_episodes, disabled_legs=locked, limp_legs=limp, record=True,
-                          seed=params["seed"], nthread=run.nthread,
-                          robot=setting_robot(run.robot, params["setting"], params.get("hardware")))
-    try:
-        rollout = run_task(env, planner, task, progress=run.progress)
-    finally:
-        env.close()
+    rollout = evaluation_rollout(run.robot, params, task, make_low_level(task.num_episodes), model,
+                                 nthread=run.nthread, progress=run.progress)
     return report.task_evaluation(rollout, task, method=run.method, robot=run.robot.name, setting=params["setting"],
                                   seed=params["seed"])
+
+
+def evaluation_rollout(robot, params: dict, task, low_level, model: TrainedCoMModel, *, nthread=None,
+                       progress: bool = False):
+    """The :class:`~hierloco.components.evaluation.TaskRollout` of an evaluation stage's ``params`` (setting,
+    planner, seed, device, hardware): what :func:`build_evaluation` scores, and what ``recipes/adverse/trace.py``
+    replays from a finished run's evaluation key."""
+    world_model = make_world_model(model.model, low_level, device=params["device"])
+    planner = make_planner(world_model, seed=params["seed"], **params["planner"])
+    locked, limp = fault_legs(robot, params["setting"])
+    env = LatentActionEnv(low_level, num_robots=task.num_episodes, disabled_legs=locked, limp_legs=limp,
+                          record=True, seed=params["seed"], nthread=nthread,
+                          robot=setting_robot(robot, params["setting"], params.get("hardware")))
+    try:
+        return run_task(env, planner, task, progress=progress)
+    finally:
+        env.close()
 
 
 # ---------------------------------------------------------------------------------------------------- helpers

@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from hierloco.components.com_model import (CoMDynamicsModel, TrainedCoMModel, apply_delta, holdout_split,
-                                           local_transition, train_com_model)
+                                           local_transition, prediction_errors, train_com_model)
 from hierloco.envs.frames import local_to_world, wrap_angle
 from hierloco.io import ArtifactError
 
@@ -285,3 +285,35 @@ def test_net_is_a_torchrl_mlp_with_the_hand_built_layout_and_weights():
     fresh = CoMDynamicsModel(action_dim=3)
     fresh.load_state_dict({**dict(fresh.state_dict()), **old_state})
     torch.testing.assert_close(fresh(torch.ones(4, 2), torch.ones(4, 3)), model(torch.ones(4, 2), torch.ones(4, 3)))
+
+
+class _FixedDelta(torch.nn.Module):
+    """A stand-in CoM model that always predicts the same local-frame delta."""
+
+    def __init__(self, delta):
+        super().__init__()
+        self.delta = torch.as_tensor(delta, dtype=torch.float64)
+
+    def forward(self, velocity_local, action):
+        return self.delta.expand(*torch.broadcast_shapes(velocity_local.shape[:-1], action.shape[:-1]), 5)
+
+
+def test_prediction_errors_on_taken_actions():
+    # a robot turning 0.4 rad per action across the +-pi seam, moving 0.2 m forward: the exact model errs by 0
+    delta = torch.tensor([0.2, 0.0, 0.4, 0.2, 0.0], dtype=torch.float64)
+    states = [torch.tensor([1.0, -2.0, 2.5, 0.0, 0.0], dtype=torch.float64)]
+    for _ in range(4):
+        states.append(apply_delta(states[-1], delta))
+    states = torch.stack(states)[None].repeat(2, 1, 1)  # E=2 x (T+1)=5 x 5
+    actions = torch.zeros(2, 4, 3)
+    exact = prediction_errors(_FixedDelta(delta), states, actions)
+    assert exact.shape == (2, 4, 5)
+    assert exact.abs().max() < 1e-9
+    # one that over-predicts the turn by 0.3 rad (wrapped) and the forward step by 0.05 m errs by exactly that
+    off = prediction_errors(_FixedDelta(delta + torch.tensor([0.05, 0.0, 0.3 + 2 * math.pi, 0.0, 0.0])), states,
+                            actions)
+    np.testing.assert_allclose(off[..., 0], 0.05, atol=1e-9)
+    np.testing.assert_allclose(off[..., 2], 0.3, atol=1e-6)  # wrap_angle works to float32 precision
+    np.testing.assert_allclose(off[..., [1, 3, 4]], 0.0, atol=1e-9)
+    with pytest.raises(ValueError, match="E x \\(T \\+ 1\\) x 5 and actions E x T x A"):
+        prediction_errors(_FixedDelta(delta), states, torch.zeros(2, 5, 3))

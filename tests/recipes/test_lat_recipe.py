@@ -142,6 +142,23 @@ def test_evaluate_adds_a_task_without_touching_training(tiny_run, tmp_path):
     assert refused.returncode == 2 and "evaluate.py changes only" in refused.stderr
 
 
+def test_a_traced_evaluation_replays_the_same_closed_loop_and_scores_the_model_on_its_plans(tiny_run, tmp_path):
+    import numpy as np
+
+    from recipes.adverse import trace
+
+    out = trace.trace(tiny_run[0], "legs_disabled", "velocity_tracking")
+    assert out["normalized_cost"] == pytest.approx(out["recorded_normalized_cost"], rel=1e-6)  # the same episodes
+    assert sum(out["cost_terms"].values()) == pytest.approx(out["actual_cost"], rel=1e-6)
+    assert np.mean([s["cost"] for s in out["steps"]]) == pytest.approx(out["actual_cost"], rel=1e-6)  # 1 episode
+    assert all(out["plan_rmse"][k] >= abs(out["plan_bias"][k]) for k in out["plan_rmse"])
+    assert set(out["heldout_rmse"]) == set(out["plan_rmse"]) == {"dx", "dy", "dyaw", "vx_next", "vy_next"}
+    trace.main([str(tiny_run[0]), "legs_disabled", "velocity_tracking", "--out", str(tmp_path / "trace.md")])
+    assert "| dyaw |" in (tmp_path / "trace.md").read_text()
+    with pytest.raises(SystemExit, match="no evaluation of 'walking' in setting 'legs_disabled' \\(it has: goal"):
+        trace.main([str(tiny_run[0]), "legs_disabled", "walking"])
+
+
 @pytest.mark.slow
 def test_a_finished_run_renders_a_video_it_did_not_render(tiny_run, tmp_path):
     import shutil
