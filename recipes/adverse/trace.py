@@ -30,6 +30,8 @@ from hierloco.trained import load_run
 from recipes.common.config import make_task_from_spec
 from recipes.common.stages import evaluation_rollout
 
+PLANNER_KEYS = ("name", "horizon", "num_candidates", "optim_steps", "top_k", "temperature")
+
 
 def evaluation_key(run_dir: Path, setting: str, task: str) -> tuple[dict, Path]:
     """The key of the run's evaluation of ``task`` in ``setting`` and its artifact (the newest, if several)."""
@@ -41,12 +43,15 @@ def evaluation_key(run_dir: Path, setting: str, task: str) -> tuple[dict, Path]:
     return json.loads(keys[-1].read_text()), keys[-1].with_name(keys[-1].name.removesuffix(".key.json"))
 
 
-def trace(run_dir: str, setting: str, task_name: str, *, nthread: int | None = None) -> dict:
+def trace(run_dir: str, setting: str, task_name: str, *, nthread: int | None = None,
+          planner: dict | None = None) -> dict:
     """Replays the evaluation and returns its numbers (see the module doc); ``steps`` is the first episode per
-    step: target, yaw error, the cost the model predicted for the chosen action and the cost it had."""
+    step: target, yaw error, the cost the model predicted for the chosen action and the cost it had. ``planner``
+    changes the evaluation's planner options (``{"horizon": 3, "name": "cem"}``): the same run and model, planned
+    otherwise."""
     run_dir = Path(run_dir)
     key, artifact = evaluation_key(run_dir, setting, task_name)
-    params = key["params"]
+    params = {**key["params"], "planner": {**key["params"]["planner"], **(planner or {})}}
     run = load_run(run_dir)
     task = make_task_from_spec(params["task_name"], params["task"])
     trained = run.com_model("normal" if is_unadapted(setting) else setting)
@@ -62,10 +67,11 @@ def trace(run_dir: str, setting: str, task_name: str, *, nthread: int | None = N
         predicted = trained.model.predict(states[:, :-1].float(), features).double()
     predicted_cost = task.cost(states[:, :-1], predicted, episodes, steps).numpy()
     yaw_error = wrap_angle(states[:, 1:, 2] - task.start_yaw).numpy()
-    recorded = TaskEvaluation.load(artifact).metrics.get("normalized_cost") if artifact.is_file() else None
+    recorded = (TaskEvaluation.load(artifact).metrics.get("normalized_cost") if artifact.is_file() and not planner
+                else None)
     target = task.target(episodes[:1].expand(1, task.num_steps), steps)[0].numpy()
     return {
-        "run_dir": str(run_dir), "setting": setting, "task": task.name,
+        "run_dir": str(run_dir), "setting": setting, "task": task.name, "planner": params["planner"],
         "normalized_cost": float(np.mean(result.normalized_cost)), "recorded_normalized_cost": recorded,
         "cost_terms": {term: float(np.mean(values)) for term, values in result.cost_terms.items()},
         "final_yaw_error": float(np.mean(np.abs(yaw_error[:, -1]))), "max_yaw_error": float(np.abs(yaw_error).max()),
@@ -82,8 +88,9 @@ def trace(run_dir: str, setting: str, task_name: str, *, nthread: int | None = N
 def markdown(out: dict) -> str:
     recorded = out["recorded_normalized_cost"]
     lines = [f"# Plans against outcomes: `{out['run_dir']}`, {out['setting']}, {out['task']}", "",
+             "- planner: " + ", ".join(f"{k}={v}" for k, v in sorted(out["planner"].items())),
              f"- normalised cost {out['normalized_cost']:.3f} (the run's evaluation: "
-             + (f"{recorded:.3f})" if recorded is not None else "not on disk)"),
+             + (f"{recorded:.3f})" if recorded is not None else "not on disk, or planned otherwise)"),
              "- mean cost per step: " + ", ".join(f"{k} {v:.3f}" for k, v in out["cost_terms"].items())
              + f"; the model predicted {out['predicted_cost']:.3f} for the chosen actions, they cost "
              f"{out['actual_cost']:.3f}",
@@ -107,11 +114,19 @@ def main(argv=None) -> None:
     parser.add_argument("setting", help="e.g. normal, legs_disabled")
     parser.add_argument("task", help="e.g. velocity_tracking, goal_reaching")
     parser.add_argument("--nthread", type=int, default=None)
+    parser.add_argument("--planner", nargs="*", default=[], metavar="KEY=VALUE",
+                        help="plan otherwise, e.g. --planner horizon=3 name=cem")
     parser.add_argument("--out", help="also write the markdown here")
     args = parser.parse_args(argv)
     if not (Path(args.run_dir) / "run.json").is_file():
         sys.exit(f"{args.run_dir} is not a run directory (no run.json)")
-    text = markdown(trace(args.run_dir, args.setting, args.task, nthread=args.nthread))
+    planner = {}
+    for item in args.planner:
+        name, sep, value = item.partition("=")
+        if not sep or name not in PLANNER_KEYS:
+            sys.exit(f"--planner takes KEY=VALUE with KEY one of {', '.join(PLANNER_KEYS)}; got {item!r}")
+        planner[name] = value if name == "name" else (float(value) if name == "temperature" else int(value))
+    text = markdown(trace(args.run_dir, args.setting, args.task, nthread=args.nthread, planner=planner))
     print(text)
     if args.out:
         write_text(args.out, text)

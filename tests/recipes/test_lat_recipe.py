@@ -157,6 +157,11 @@ def test_a_traced_evaluation_replays_the_same_closed_loop_and_scores_the_model_o
     assert "| dyaw |" in (tmp_path / "trace.md").read_text()
     with pytest.raises(SystemExit, match="no evaluation of 'walking' in setting 'legs_disabled' \\(it has: goal"):
         trace.main([str(tiny_run[0]), "legs_disabled", "walking"])
+    with pytest.raises(SystemExit, match="KEY one of name, horizon, .*got 'depth=3'"):
+        trace.main([str(tiny_run[0]), "legs_disabled", "velocity_tracking", "--planner", "depth=3"])
+    longer = trace.trace(tiny_run[0], "legs_disabled", "velocity_tracking", planner={"horizon": 2, "name": "cem"})
+    assert longer["planner"]["horizon"] == 2 and longer["planner"]["name"] == "cem"
+    assert longer["recorded_normalized_cost"] is None  # planned otherwise: no recorded number to compare with
 
 
 @pytest.mark.slow
