@@ -7,7 +7,8 @@ Each run learns its low level on the nominal robot (LAT: from 20 experts, as the
 is evaluated in three settings: ``normal`` (the nominal robot), ``hardware_unadapted`` (the perturbed copy of
 :func:`hierloco.envs.robots.hardware.perturbed`, planned with the nominal CoM model) and ``hardware`` (the same
 copy, with the CoM model learned again on it from 2000 samples). Runs go in
-``outputs/hardware/<preset>/<method>/<robot>_seed<seed>``. Writes ``hardware.csv``, ``hardware.md`` (the paper's
+``outputs/hardware/<preset>/<method>/<robot>_seed<seed>``, suffixed with the options that differ from the default
+perturbation (``daisy_seed0-servo_latency0.04``), so studies of several gaps run side by side. Writes ``hardware.csv``, ``hardware.md`` (the paper's
 hardware metrics: goals reached and the steps to reach them, tracking costs; then the full table and the
 perturbation used) and ``wallclock.md`` in ``out_dir``.
 """
@@ -59,15 +60,32 @@ def check(cfg) -> tuple[list, dict]:
     return robots, options
 
 
+def gap_tag(options: dict) -> str:
+    """The run-directory suffix naming how ``options`` differ from the default perturbation (``""`` for none), so
+    that a study of another gap runs beside the default's instead of being refused by its cached stages.
+
+        >>> gap_tag({"servo_latency": 0.04, "motor_strength": 0.8})   # 0.8 is the default strength
+        '-servo_latency0.04'
+    """
+    from hierloco.envs.robots import HARDWARE, hardware_options
+
+    changed = {k: v for k, v in hardware_options(**options).items() if v != hardware_options()[k]}
+    if not changed:
+        return ""
+    text = lambda v: "_".join(f"{x:g}" for x in v) if isinstance(v, tuple) else f"{v:g}"  # noqa: E731
+    return "-" + "-".join(f"{k}{text(changed[k])}" for k in HARDWARE if k in changed)
+
+
 def jobs(cfg, robots, options: dict) -> list:
     planned = []
+    tag = gap_tag(options)
     perturbation = [f"+hardware.{k}={list(v) if isinstance(v, (list, tuple)) else v}" for k, v in options.items()]
     for spec in robots:
         for method in cfg.methods:
             recipe, variant = studies.resolve_method(method, cfg.variants)
             experts = [f"experts.num_experts={cfg.num_experts}"] if recipe in EXPERT_METHODS else []
             for seed in cfg.seeds:
-                run_dir = Path("outputs") / "hardware" / cfg.preset_name / method / f"{spec.name}_seed{seed}"
+                run_dir = Path("outputs") / "hardware" / cfg.preset_name / method / f"{spec.name}_seed{seed}{tag}"
                 overrides = [f"preset={cfg.preset_name}", f"robot={spec.reference}", f"seed={seed}",
                              f"settings=[{','.join(SETTINGS)}]", f"dynamics.num_transitions={cfg.num_transitions}",
                              "progress=false", *experts, *perturbation, *variant, *cfg.overrides]

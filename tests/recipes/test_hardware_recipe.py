@@ -27,7 +27,7 @@ def test_hardware_tiny(tmp_path):
     assert {r["setting"] for r in rows} == {"normal", "hardware_unadapted", "hardware"}
     summary = (out / "hardware.md").read_text()
     assert "| a1 | lat | perturbed, model re-learned |" in summary and "servo_latency 0.04" in summary
-    run = tmp_path / "outputs" / "hardware" / "tiny" / "lat" / "a1_seed0"
+    run = tmp_path / "outputs" / "hardware" / "tiny" / "lat" / "a1_seed0-servo_latency0.04"  # beside the default gap
     assert not list(run.glob("dynamics_*_hardware_unadapted*")), "the unadapted setting learns nothing"
     normal, hardware = (TransitionData.load(run / f"dynamics_data_{s}.npz") for s in ("normal", "hardware"))
     assert len(hardware) == 50 and not np.allclose(normal.next_com_state, hardware.next_com_state)
@@ -37,3 +37,18 @@ def test_hardware_tiny(tmp_path):
 
     assert key["after"]["model"] == digest(normal_model), "planned with the nominal robot's CoM model"
     assert key["params"]["hardware"]["servo_latency"] == 0.04
+
+
+def test_each_gap_gets_its_own_run_directories():
+    """A study of another perturbation runs beside the default one instead of meeting its cached stages."""
+    from omegaconf import OmegaConf
+
+    from hierloco.envs.robots import get_robot
+    from recipes.hardware.run import jobs
+
+    cfg = OmegaConf.create({"methods": ["lat"], "variants": {}, "seeds": [0], "preset_name": "paper",
+                            "num_experts": 20, "num_transitions": 2000, "overrides": []})
+    run_dir = lambda options: jobs(cfg, [get_robot("daisy")], options)[0].run_dir  # noqa: E731
+    assert run_dir({}) == run_dir({"servo_latency": 0.02}) == "outputs/hardware/paper/lat/daisy_seed0"
+    assert run_dir({"motor_strength": 0.6, "com_noise": [0.04, 0.06, 0.1]}) == \
+        "outputs/hardware/paper/lat/daisy_seed0-motor_strength0.6-com_noise0.04_0.06_0.1"
