@@ -8,9 +8,9 @@ is evaluated in three settings: ``normal`` (the nominal robot), ``hardware_unada
 :func:`hierloco.envs.robots.hardware.perturbed`, planned with the nominal CoM model) and ``hardware`` (the same
 copy, with the CoM model learned again on it from 2000 samples). Runs go in
 ``outputs/hardware/<preset>/<method>/<robot>_seed<seed>``, suffixed with the options that differ from the default
-perturbation (``daisy_seed0-servo_latency0.04``), so studies of several gaps run side by side. Writes ``hardware.csv``, ``hardware.md`` (the paper's
-hardware metrics: goals reached and the steps to reach them, tracking costs; then the full table and the
-perturbation used) and ``wallclock.md`` in ``out_dir``.
+perturbation (``daisy_seed0-servo_latency0.04``), so studies of several gaps run side by side. Writes
+``hardware.csv``, ``hardware.md`` (the paper's hardware metrics: goals reached and the steps to reach them,
+tracking costs; then the full table and the perturbation used) and ``wallclock.md`` in ``out_dir``.
 """
 
 import hierloco  # noqa: F401  (first: headless MuJoCo rendering is set before anything loads MuJoCo)
@@ -56,7 +56,7 @@ def check(cfg) -> tuple[list, dict]:
         if not (isinstance(cfg[key], int) and cfg[key] >= 10):
             problems.append(f"{key} must be an integer >= 10, got {cfg[key]!r}")
     if problems:
-        raise ConfigError("bad config: " + "; ".join(problems))
+        raise ConfigError("bad config: " + "; ".join(dict.fromkeys(problems)))  # a bad option once, not per robot
     return robots, options
 
 
@@ -67,13 +67,11 @@ def gap_tag(options: dict) -> str:
         >>> gap_tag({"servo_latency": 0.04, "motor_strength": 0.8})   # 0.8 is the default strength
         '-servo_latency0.04'
     """
-    from hierloco.envs.robots import HARDWARE, hardware_options
+    from hierloco.envs.robots import hardware_options
 
-    changed = {k: v for k, v in hardware_options(**options).items() if v != hardware_options()[k]}
-    if not changed:
-        return ""
+    default = hardware_options()
     text = lambda v: "_".join(f"{x:g}" for x in v) if isinstance(v, tuple) else f"{v:g}"  # noqa: E731
-    return "-" + "-".join(f"{k}{text(changed[k])}" for k in HARDWARE if k in changed)
+    return "".join(f"-{k}{text(v)}" for k, v in hardware_options(**options).items() if v != default[k])
 
 
 def jobs(cfg, robots, options: dict) -> list:
