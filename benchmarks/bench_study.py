@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from recipes.common import studies  # noqa: E402
+from hierloco.pipeline import studies  # noqa: E402
 
 TARGET_RATIO = 1.1  # through Ray / one by one
 

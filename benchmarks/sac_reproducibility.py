@@ -25,7 +25,7 @@ import torch
 import yaml
 
 from hierloco.components.sac_low_level import train_sac_low_level
-from hierloco.runs import cpu_description
+from hierloco.pipeline.rundir import cpu_description
 
 PAPER = Path(__file__).resolve().parents[1] / "recipes" / "sac_sac" / "low_level" / "paper.yaml"
 CURVE_ROW = re.compile(r"^\| (\d+) \| (\d+) \| ([-\d.]+) \| ([-\d.]+) \| ([-\d.]+) \|$")

@@ -4,12 +4,11 @@ Implements Li et al., "Planning in Learned Latent Action Spaces for Generalizabl
 (https://arxiv.org/abs/2008.11867).
 """
 
-import os
+from hierloco import render_backend
 
-# Headless rendering through EGL (Mesa) unless the user chose otherwise; must precede dm_control's import.
-os.environ.setdefault("MUJOCO_GL", "egl")
-if os.environ["MUJOCO_GL"] in ("egl", "osmesa"):
-    os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
+# Headless rendering through EGL (Mesa) when it is installed, else none (videos off, everything else runs); chosen
+# before anything imports MuJoCo or dm_control (hierloco.render_backend).
+render_backend.choose()
 
 __version__ = "0.1.0"
 

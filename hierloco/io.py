@@ -1,7 +1,9 @@
 """Artifacts on disk: atomic writes and self-describing array files.
 
-Every artifact is written to a temporary file beside its destination and moved into place in one step, so a
-killed run never leaves a half-written file under a final name. Array files are ``.npz`` archives that carry their
+Every artifact is written to a temporary file and moved into place in one step, so a killed run never leaves a
+half-written file under a final name. Temporary files are named ``.hierloco-tmp-*``; they are made beside their
+destination, or, inside :func:`temporaries_in` (a run directory), at that directory's top level, where the next
+run of that directory removes what a killed run left (and nothing else). Array files are ``.npz`` archives that carry their
 metadata (a JSON dict) with them; a file that cannot be read gets an error that names it.
 
 Example:
@@ -21,6 +23,7 @@ import os
 import tempfile
 import zipfile
 from contextlib import contextmanager
+from contextvars import ContextVar
 from pathlib import Path
 from typing import Any, Iterator, Mapping
 
@@ -31,16 +34,40 @@ _UMASK = os.umask(0)
 os.umask(_UMASK)
 
 
+TEMPORARY_PREFIX = ".hierloco-tmp-"
+_TEMPORARIES: ContextVar[Path | None] = ContextVar("hierloco_temporaries", default=None)
+
+
 class ArtifactError(ValueError):
     """An artifact on disk is missing, corrupted or does not match what was asked for."""
 
 
 @contextmanager
+def temporaries_in(directory: str | os.PathLike) -> Iterator[None]:
+    """Within the block, atomic writes to files under ``directory`` stage their temporary file at its top level."""
+    token = _TEMPORARIES.set(Path(directory).absolute())
+    try:
+        yield
+    finally:
+        _TEMPORARIES.reset(token)
+
+
+def _staging_directory(path: Path) -> Path:
+    top = _TEMPORARIES.get()
+    if top is not None and path.absolute().is_relative_to(top):
+        top.mkdir(parents=True, exist_ok=True)
+        return top
+    return path.parent
+
+
+@contextmanager
 def atomic_path(path: str | os.PathLike) -> Iterator[str]:
-    """Yields a temporary path beside ``path``; on success it replaces ``path`` atomically, on error it vanishes."""
+    """Yields a temporary path (``.hierloco-tmp-*``); on success it replaces ``path`` atomically, on error it
+    vanishes."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp" + path.suffix, dir=path.parent)
+    fd, tmp = tempfile.mkstemp(prefix=f"{TEMPORARY_PREFIX}{path.name}.", suffix=path.suffix,
+                               dir=_staging_directory(path))
     os.close(fd)
     os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes 0600 files; artifacts get the usual permissions
     try:

@@ -43,12 +43,16 @@ class Registry(Generic[T]):
         kind: what the parts are, in messages ("planner").
         group: the entry-point group installed packages add parts through (default ``hierloco.<kind>s``).
         context: constructor arguments the pipeline supplies itself; they are not options.
+        modules: modules that register built-in parts, imported on the first lookup (so that reading the registry
+            does not import every part up front).
     """
 
-    def __init__(self, kind: str, *, group: str | None = None, context: Iterable[str] = ()):
+    def __init__(self, kind: str, *, group: str | None = None, context: Iterable[str] = (),
+                 modules: Iterable[str] = ()):
         self.kind = kind
         self.group = group or f"hierloco.{kind}s"
         self.context = tuple(context)
+        self.modules = tuple(modules)
         self._entries: dict[str, T] = {}
         self._entry_points_loaded = False
 
@@ -79,6 +83,8 @@ class Registry(Generic[T]):
         if self._entry_points_loaded:
             return
         self._entry_points_loaded = True
+        for module in self.modules:
+            importlib.import_module(module)
         for entry_point in importlib.metadata.entry_points(group=self.group):
             if entry_point.name in self._entries:
                 continue
@@ -106,10 +112,25 @@ class Registry(Generic[T]):
         return iter(self.names())
 
     def __getitem__(self, name: str) -> T:
+        """The part registered as ``name``; ``package.module:Class`` imports a part that is not installed (its
+        module registers it, or it is registered here under its ``registry_name``, else under ``name``)."""
         self._load_entry_points()
+        if name not in self._entries and isinstance(name, str) and ":" in name:
+            return self._import(name)
         if name not in self._entries:
             raise ValueError(f"unknown {self.kind} {name!r} ({self.kind}s: {', '.join(self.names())})")
         return self._entries[name]
+
+    def _import(self, reference: str) -> T:
+        module, _, attribute = reference.partition(":")
+        try:
+            target = getattr(importlib.import_module(module), attribute)
+        except (ImportError, AttributeError) as error:
+            raise ValueError(f"{self.kind} {reference!r}: cannot import it ({type(error).__name__}: {error})") from None
+        name = getattr(target, "registry_name", None)
+        if name is None or self._entries.get(name) is not target:
+            self.register(reference)(target)
+        return target
 
     def options(self, name: str) -> dict[str, Any]:
         """The options of ``name`` and their defaults: its constructor's keyword arguments with defaults, minus the

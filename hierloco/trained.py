@@ -2,7 +2,7 @@
 
 :func:`load_run` opens a run directory written by a recipe (``recipes/<method>/train.py``) and gives, for new
 research code, the trained low level, the learned CoM world model of a setting and an MPC planner over it, without
-running any recipe code. :func:`make_world_model` and :func:`make_planner` are the factories the recipes use too.
+running any recipe code. :func:`make_world_model` is the factory the recipes use too.
 
 Example:
     >>> run = load_run("outputs/lat/paper/a1_seed0")  # doctest: +SKIP
@@ -21,8 +21,6 @@ from typing import Any
 from hierloco.io import ArtifactError, check_schema
 
 MANIFEST = "run.json"
-PLANNER_OPTIONS = {"random_shooting": (), "cem": ("optim_steps", "top_k"), "mppi": ("optim_steps", "temperature"),
-                   "exhaustive": ()}
 
 
 def make_world_model(model, low_level, *, task=None, device: str = "cpu"):
@@ -37,22 +35,6 @@ def make_world_model(model, low_level, *, task=None, device: str = "cpu"):
                                 task=task, device=device)
     return CoMWorldModelEnv(net, action_low=low_level.action_low, action_high=low_level.action_high,
                             action_features=low_level.action_features, task=task, device=device)
-
-
-def make_planner(world_model, *, name: str = "random_shooting", horizon: int = 1, num_candidates: int = 8000,
-                 seed: int = 0, **options):
-    """An MPC planner by name (``random_shooting``, ``cem``, ``mppi``, ``exhaustive``) over ``world_model``.
-
-    ``options`` are the planner's own (``optim_steps`` and ``top_k`` for CEM, ``optim_steps`` and ``temperature``
-    for MPPI); options of other planners are ignored, so one config section serves every planner."""
-    from hierloco.components.planners import PLANNERS
-
-    if name not in PLANNERS:
-        raise ValueError(f"unknown planner {name!r} (planners: {', '.join(PLANNERS)})")
-    if name == "exhaustive":
-        return PLANNERS[name](world_model, planning_horizon=horizon)
-    own = {key: options[key] for key in PLANNER_OPTIONS[name] if key in options}
-    return PLANNERS[name](world_model, planning_horizon=horizon, num_candidates=num_candidates, seed=seed, **own)
 
 
 @dataclass
@@ -79,37 +61,25 @@ class TrainedRun:
     def settings(self) -> list[str]:
         return list(self.manifest["settings"])
 
-    def _artifact(self, name: str) -> Path:
+    def artifact(self, name: str) -> Path:
+        """The path of the run's artifact ``name`` (e.g. ``gait_policy.pt``); raises when the run lacks it."""
         path = self.path / name
         if not path.exists():
             raise ArtifactError(f"{self.path} has no {name}: the {self.method} run did not finish that stage")
         return path
 
-    def low_level(self, num_robots: int = 1):
+    def low_level(self, num_robots: int = 1, device: str = "cpu"):
         """The trained low level (LAT and SAC: ``pi(., z)``; LIB: expert replay; IK: the expert controller for
-        ``num_robots`` robots; SAC-SAC: the SAC velocity policy)."""
-        kind = self.manifest["low_level"]["kind"]
-        if kind == "latent":
-            from hierloco.components.gait_policy import TrainedGaitPolicy
-            from hierloco.components.low_level import LatentLowLevel
+        ``num_robots`` robots; SAC-SAC: the SAC velocity policy), rebuilt by its class in the low-level registry
+        (:data:`hierloco.envs.low_level.LOW_LEVELS`) from the options the run recorded."""
+        from hierloco.envs.low_level import LOW_LEVELS
 
-            return LatentLowLevel(TrainedGaitPolicy.load(self._artifact("gait_policy.pt")), self.robot)
-        if kind == "expert_replay":
-            from hierloco.components.expert_library import ExpertLibrary
-            from hierloco.components.low_level import ExpertReplayLowLevel
-
-            return ExpertReplayLowLevel(ExpertLibrary.load(self._artifact("experts.npz")))
-        if kind == "command":
-            from hierloco.components.low_level import CommandLowLevel
-
-            options = self.manifest["low_level"]["options"]
-            return CommandLowLevel(self.robot, num_robots, **options)
-        if kind == "sac_command":
-            from hierloco.components.sac_low_level import SACLowLevel, TrainedSACLowLevel
-
-            options = self.manifest["low_level"].get("options", {})
-            return SACLowLevel(TrainedSACLowLevel.load(self._artifact("sac_low_level.pt")), **options)
-        raise ArtifactError(f"{self.path / MANIFEST}: unknown low level kind {kind!r}")
+        spec = self.manifest["low_level"]
+        try:
+            cls = LOW_LEVELS[spec["kind"]]
+        except ValueError as error:
+            raise ArtifactError(f"{self.path / MANIFEST}: {error}") from None
+        return cls.from_run(self, num_robots=num_robots, device=device, **spec.get("options", {}))
 
     def com_model(self, setting: str = "normal"):
         """The trained :class:`~hierloco.components.com_model.TrainedCoMModel` of ``setting``."""
@@ -117,14 +87,16 @@ class TrainedRun:
 
         if setting not in self.settings:
             raise ValueError(f"{self.path} was trained for settings {self.settings}, not {setting!r}")
-        return TrainedCoMModel.load(self._artifact(f"dynamics_model_{setting}.pt"))
+        return TrainedCoMModel.load(self.artifact(f"dynamics_model_{setting}.pt"))
 
     def world_model(self, setting: str = "normal", task=None, device: str = "cpu"):
         """The learned CoM world model env of ``setting``, scoring with ``task`` (a :class:`hierloco.envs.Task`)."""
-        return make_world_model(self.com_model(setting).model, self.low_level(), task=task, device=device)
+        return make_world_model(self.com_model(setting).model, self.low_level(device=device), task=task, device=device)
 
     def planner(self, task=None, setting: str = "normal", device: str = "cpu", **overrides):
         """The run's MPC planner (its recorded settings, changed by ``overrides``) over :meth:`world_model`."""
+        from hierloco.components.planners import make_planner
+
         options = {**self.manifest["planner"], **overrides}
         return make_planner(self.world_model(setting, task, device), seed=self.manifest["seed"], **options)
 

@@ -9,7 +9,7 @@ import torch
 # The suite's own networks are small: one torch thread trains them several times faster than two whenever the
 # cores are shared (the simulation's threads, a Ray worker, a busy CI machine), because a parallel op waits for its
 # slowest thread (benchmarks/bench_sac.py measures it). The recipe runs the tests start as subprocesses inherit the
-# same setting (as a study's jobs do, recipes/common/studies.py); the simulation's threads still follow the cores.
+# same setting (as a study's jobs do, hierloco/pipeline/studies.py); the simulation's threads still follow the cores.
 torch.set_num_threads(1)
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from hierloco.io import ArtifactError
-from hierloco.runs import ConfigMismatchError, RunDirectory
+from hierloco.pipeline.rundir import ConfigMismatchError, RunDirectory
 
 CONFIG = {"robot": "a1", "experts": {"num": 3, "seed": 0}, "lr": 1e-3, "dims": (2, 3)}
 
@@ -172,7 +172,7 @@ def test_config_mismatch_is_an_artifact_error():
 
 LOCKER = """
 import sys, time
-from hierloco.runs import RunDirectory
+from hierloco.pipeline.rundir import RunDirectory
 run = RunDirectory(sys.argv[1])
 run.acquire("policy.epochs=20")
 print("locked", flush=True)
@@ -190,7 +190,7 @@ def _locker(tmp_path):
 
 
 def test_a_second_process_is_refused_naming_the_holder(tmp_path):
-    from hierloco.runs import RunLockedError
+    from hierloco.pipeline.rundir import RunLockedError
 
     holder = _locker(tmp_path)
     try:
@@ -213,7 +213,7 @@ def test_a_killed_holder_s_lock_is_taken_over(tmp_path):
 
 
 def test_verify_checks_a_whole_plan_before_any_work(tmp_path):
-    from hierloco.runs import StageSpec
+    from hierloco.pipeline.rundir import StageSpec
 
     Stage().run(RunDirectory(tmp_path))
     Stage([2]).run(RunDirectory(tmp_path), {"b": 1}, name="b", filename="b.json")
@@ -230,7 +230,7 @@ def test_verify_checks_a_whole_plan_before_any_work(tmp_path):
 def test_a_read_only_directory_is_read_but_never_written(tmp_path):
     import os
 
-    from hierloco.runs import ReadOnlyRunError, StageSpec
+    from hierloco.pipeline.rundir import ReadOnlyRunError, StageSpec
 
     stage = Stage()
     stage.run(RunDirectory(tmp_path))
@@ -248,7 +248,7 @@ def test_a_read_only_directory_is_read_but_never_written(tmp_path):
 
 
 def test_readonly_can_be_forced(tmp_path):
-    from hierloco.runs import ReadOnlyRunError
+    from hierloco.pipeline.rundir import ReadOnlyRunError
 
     with pytest.raises(ReadOnlyRunError, match="numbers"):
         Stage().run(RunDirectory(tmp_path, readonly=True))

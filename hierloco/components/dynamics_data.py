@@ -31,6 +31,7 @@ from tqdm.auto import tqdm
 
 from hierloco.envs.latent_env import LatentActionEnv
 from hierloco.envs.robots.spec import CONTROL_TIMESTEP
+from hierloco.errors import Finding
 from hierloco.io import ArtifactError, load_arrays, save_arrays
 
 
@@ -38,7 +39,7 @@ MIN_ACTIONS_JUDGED = 200  # random actions executed before a setting where (near
 FALL_LIMIT = 0.95
 
 
-class DynamicsDataError(RuntimeError):
+class DynamicsDataError(Finding, RuntimeError):
     """Nearly every random action ends in a fall: the setting leaves the low level nothing to learn from."""
 
 

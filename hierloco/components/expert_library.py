@@ -41,6 +41,7 @@ from hierloco.envs.robots import (
     get_robot,
     robot_fingerprint,
 )
+from hierloco.errors import Finding
 from hierloco.io import ArtifactError, load_arrays, save_arrays
 
 LIBRARY_FORMAT = 1
@@ -254,7 +255,7 @@ MIN_REACH = 0.4  # of the box half-width, towards each edge of each axis
 NO_RESPONSE_SLOPE = 0.25  # achieved per commanded below this: the robot ignores the command
 
 
-class ExpertQualityError(ValueError):
+class ExpertQualityError(Finding, ValueError):
     """The expert gaits do not walk as commanded: the library cannot represent the command box.
 
     Attributes:

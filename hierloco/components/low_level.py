@@ -27,16 +27,21 @@ import torch
 from hierloco.components.expert_library import ExpertLibrary
 from hierloco.components.experts import RaibertController, run_closed_loop
 from hierloco.components.gait_policy import TrainedGaitPolicy
-from hierloco.envs.low_level import LowLevel
+from hierloco.envs.low_level import LOW_LEVELS, LowLevel
 from hierloco.envs.robots import RobotSpec, get_robot
 
 __all__ = ["CommandLowLevel", "ExpertReplayLowLevel", "LatentLowLevel", "LowLevel"]
 
 
+@LOW_LEVELS.register("latent")
 class LatentLowLevel(LowLevel):
     """LAT: ``pi(., z)`` for a latent ``z`` in the learned latent box, open loop."""
 
     kind = "latent"
+
+    @classmethod
+    def from_run(cls, run, *, num_robots: int = 1, device: str = "cpu", **options) -> "LatentLowLevel":
+        return cls(TrainedGaitPolicy.load(run.artifact("gait_policy.pt")), run.robot, device=device)
 
     def __init__(self, trained: TrainedGaitPolicy, robot: str | RobotSpec, device: str = "cpu"):
         self.trained = trained
@@ -57,10 +62,15 @@ class LatentLowLevel(LowLevel):
         return sim.run(self.patterns(self._check(sim, actions)))
 
 
+@LOW_LEVELS.register("expert_replay")
 class ExpertReplayLowLevel(LowLevel):
     """LIB: replays expert ``g``'s recorded N-step pattern; the action is the index ``g`` in ``[0, G)``."""
 
     kind = "expert_replay"
+
+    @classmethod
+    def from_run(cls, run, *, num_robots: int = 1, device: str = "cpu", **options) -> "ExpertReplayLowLevel":
+        return cls(ExpertLibrary.load(run.artifact("experts.npz")))
 
     def __init__(self, library: ExpertLibrary):
         self.library = library
@@ -85,6 +95,7 @@ class ExpertReplayLowLevel(LowLevel):
         return sim.run(self.library.joint_targets[index])
 
 
+@LOW_LEVELS.register("command")
 class CommandLowLevel(LowLevel):
     """IK (Li et al., RA-L 2021, Sec. IV): the Raibert controller tracks a desired ``(vx, vy, yaw_rate)`` for one
     action, closed loop.
@@ -114,6 +125,10 @@ class CommandLowLevel(LowLevel):
     """
 
     kind = "command"
+
+    @classmethod
+    def from_run(cls, run, *, num_robots: int = 1, device: str = "cpu", **options) -> "CommandLowLevel":
+        return cls(run.robot, num_robots, **options)
 
     def __init__(self, robot: str | RobotSpec, num_robots: int, steps_per_action: int = 100,
                  command_low=None, command_high=None, *, feedback_steps: int | None = None,

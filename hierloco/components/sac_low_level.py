@@ -31,7 +31,7 @@ from typing import Mapping, Sequence
 import numpy as np
 import torch
 
-from hierloco.components.low_level import LowLevel
+from hierloco.envs.low_level import LOW_LEVELS, LowLevel
 from hierloco.components.sac import PAPER_BATCH_SIZE, PAPER_HIDDEN, PAPER_LR, SACAgent, torch_threads, train_sac
 from hierloco.envs.batched_sim import BatchedSimulator, SimulationResult
 from hierloco.envs.robots import CONTROL_TIMESTEP, RobotSpec, get_robot
@@ -161,6 +161,7 @@ def train_sac_low_level(
     return TrainedSACLowLevel(agent, env.interface, {"robot": robot.name, "settings": settings, **report})
 
 
+@LOW_LEVELS.register("sac_command")
 class SACLowLevel(LowLevel):
     """SAC-SAC's low level: the action is a velocity command ``(vx, vy, yaw_rate)`` (local frame, m/s and rad/s),
     executed by the trained actor (its deterministic action) closed loop for ``steps_per_action`` control steps on
@@ -180,6 +181,10 @@ class SACLowLevel(LowLevel):
     """
 
     kind = "sac_command"
+
+    @classmethod
+    def from_run(cls, run, *, num_robots: int = 1, device: str = "cpu", **options) -> "SACLowLevel":
+        return cls(TrainedSACLowLevel.load(run.artifact("sac_low_level.pt")), **options)
 
     def __init__(self, trained: TrainedSACLowLevel, steps_per_action: int = 100,
                  command_low: Sequence[float] | None = None, command_high: Sequence[float] | None = None,

@@ -26,6 +26,12 @@ import numpy as np
 
 from hierloco.envs.batched_sim import BatchedSimulator, SimulationResult
 from hierloco.envs.robots import RobotSpec
+from hierloco.registry import Registry
+
+# The low levels by kind (what a run's ``run.json`` names): a new one is a :class:`LowLevel` subclass decorated with
+# ``@LOW_LEVELS.register("kind")`` with a ``from_run`` classmethod that rebuilds it from a trained run's artifacts.
+LOW_LEVELS = Registry("low_level", context=("run", "num_robots", "device"),
+                      modules=("hierloco.components.low_level", "hierloco.components.sac_low_level"))
 
 
 class LowLevel:
@@ -49,6 +55,12 @@ class LowLevel:
     def run(self, sim: BatchedSimulator, actions: np.ndarray) -> SimulationResult:
         """Executes one action (``B x A``) on every copy of ``sim``; returns the ``B x N`` per-step result."""
         raise NotImplementedError
+
+    @classmethod
+    def from_run(cls, run, *, num_robots: int = 1, device: str = "cpu", **options) -> "LowLevel":
+        """This low level as a trained run (:class:`hierloco.trained.TrainedRun`) recorded it: ``options`` are what
+        the run's ``run.json`` holds under ``low_level.options``."""
+        raise NotImplementedError(f"{cls.__name__} cannot be rebuilt from a run")
 
     def reset(self, mask: np.ndarray | None = None) -> None:
         """Forgets any internal state for the copies in ``mask`` (default all); stateless low levels ignore it."""

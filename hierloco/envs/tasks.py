@@ -31,7 +31,6 @@ Example:
 
 from __future__ import annotations
 
-import inspect
 import math
 import numbers
 from dataclasses import dataclass, field
@@ -43,6 +42,11 @@ from tensordict import TensorDictBase
 
 from hierloco.envs.frames import world_to_local, wrap_angle
 from hierloco.envs.robots import START_YAW
+from hierloco.registry import Registry
+
+# The task types by name (a task's ``task:`` field in a recipe's ``eval`` section): a new type is a :class:`Task`
+# subclass decorated with ``@TASKS.register("name")``; its options are its constructor's keyword arguments.
+TASKS = Registry("task", context=("name",))
 
 W_POSITION, W_YAW = 2.0, 1.0  # [w1, w2]
 SUCCESS_RADIUS = 0.2  # m
@@ -103,6 +107,7 @@ class Task:
     step_duration: float = STEP_DURATION
     start_yaw: float = START_YAW
     has_success: bool = True  # whether ``final_error <= 0.2`` means success
+    figures: tuple[str, ...] = ("paths",)  # what a run draws of it: "paths", "velocity" (plot), "gait" (diagram)
     cost_term_names: tuple[str, ...] = ("tracking", "yaw")
 
     def __init__(self, name: str | None = None):
@@ -255,6 +260,7 @@ class TaskResult:
     cost_terms: dict[str, np.ndarray] = field(default_factory=dict)
 
 
+@TASKS.register("velocity_tracking")
 class VelocityTracking(Task):
     """Track world-frame CoM velocities: each target held ``steps_per_target`` steps, the schedule ``rounds`` times.
 
@@ -266,6 +272,7 @@ class VelocityTracking(Task):
 
     kind = "velocity_tracking"
     has_success = False  # final_error is the velocity error of the last step (m/s)
+    figures = ("paths", "velocity")
     target_is_velocity = True
 
     def __init__(self, velocities: Sequence[Sequence[float]] = ((0.0, 0.2), (0.2, 0.0), (0.0, -0.2), (-0.2, 0.0)),
@@ -292,6 +299,7 @@ class VelocityTracking(Task):
         return torch.linalg.vector_norm(target - velocity, dim=-1)
 
 
+@TASKS.register("goal_reaching")
 class GoalReaching(Task):
     """Reach goals evenly spread on a circle around the start, one episode of ``num_steps`` per goal.
 
@@ -302,6 +310,7 @@ class GoalReaching(Task):
     """
 
     kind = "goal_reaching"
+    figures = ("paths", "gait")
 
     def __init__(self, radius: float = 2.0, num_goals: int = 8, num_steps: int = 30, angle_offset: float = 0.0,
                  goals: Sequence[Sequence[float]] | None = None, name: str | None = None):
@@ -363,6 +372,7 @@ def s_path(num_points: int = 2001) -> np.ndarray:
     return np.concatenate([first, second[1:]])
 
 
+@TASKS.register("trajectory_tracking")
 class TrajectoryTracking(Task):
     """Follow a reference point moving along ``path`` (default the S path) at ``speed`` m/s.
 
@@ -430,15 +440,9 @@ class TrajectoryTracking(Task):
                                   name=f"{self.name}_train")
 
 
-TASKS = {"velocity_tracking": VelocityTracking, "goal_reaching": GoalReaching,
-         "trajectory_tracking": TrajectoryTracking}
-
-
 def task_options(kind: str) -> list[str]:
-    """The keyword options of the task registered as ``kind`` (its constructor's arguments)."""
-    if kind not in TASKS:
-        raise ValueError(f"unknown task {kind!r}; tasks: {sorted(TASKS)}")
-    return list(inspect.signature(TASKS[kind]).parameters)
+    """The keyword options of the task type registered as ``kind`` (its constructor's arguments, ``name`` last)."""
+    return [*TASKS.options(kind), "name"]
 
 
 def make_task(kind: str, /, **options) -> Task:
@@ -456,10 +460,13 @@ def make_task(kind: str, /, **options) -> Task:
     ``make_task("goal_reaching", radus=2)`` raises ``ValueError: goal_reaching: unknown option 'radus'; valid
     options: radius, num_goals, num_steps, angle_offset, goals, name``.
     """
+    cls = TASKS[kind]
+    if not (isinstance(cls, type) and issubclass(cls, Task)):
+        raise ValueError(f"task {kind!r} is not a hierloco.envs.tasks.Task subclass")
     valid = task_options(kind)
     unknown = [key for key in options if key not in valid]
     if unknown:
         listed = ", ".join(repr(key) for key in unknown)
         raise ValueError(f"{kind}: unknown option{'s' if len(unknown) > 1 else ''} {listed}; valid options: "
                          f"{', '.join(valid)}")
-    return TASKS[kind](**options)
+    return cls(**options)

@@ -11,18 +11,15 @@ claims beside our numbers, ``paper_check.py``; each claim that does not hold wit
 file ``causes``) in ``out_dir``.
 """
 
-import hierloco  # noqa: F401  (first: headless MuJoCo rendering is set before anything loads MuJoCo)
+import hierloco  # noqa: F401  (first: the rendering backend is chosen before anything loads MuJoCo)
 
-import sys
 from pathlib import Path
 
 from hierloco.io import write_text
-from hierloco.plots import plot_ablations
-from hierloco.results import EPISODE_COLUMNS, csv_text, markdown_table
+from hierloco.pipeline import studies
+from hierloco.pipeline.config import ConfigError, as_lists
+from hierloco.pipeline.study import end_study, run_study, study_main, write_tables
 from recipes.ablations import paper_check
-from recipes.common import studies
-from recipes.common.config import ConfigError, as_lists
-from recipes.common.entry import recipe_main
 
 
 def check(cfg) -> None:
@@ -58,7 +55,7 @@ def jobs(cfg) -> tuple[list, list]:
     from omegaconf import OmegaConf
 
     from hierloco.envs.robots import robot_reference
-    from recipes.common.config import compose_recipe
+    from hierloco.pipeline.config import compose_recipe
 
     robot = robot_reference(cfg.robot)  # a YAML robot as an absolute path: every worker finds it
     common = [f"preset={cfg.preset_name}", f"robot={robot}", "progress=false", *cfg.overrides]
@@ -88,26 +85,22 @@ def jobs(cfg) -> tuple[list, list]:
     return planned, trials
 
 
-@recipe_main(__file__)
+@study_main(__file__)
 def main(cfg) -> None:
-    from recipes.common.report import wallclock_markdown
-
     check(cfg)
     planned, trials = jobs(cfg)
-    results = studies.run_jobs(planned, address=cfg.ray.address, cores_per_job=cfg.ray.cores_per_job,
-                               fetch_run_dirs=cfg.ray.fetch_run_dirs, records=cfg.records, dry_run=cfg.dry_run)
+    results = run_study(cfg, planned)
     rows = [{**row, **labels} for labels, index in trials if results[index].ok for row in results[index].rows]
     out = Path(cfg.out_dir)
-    write_text(out / "wallclock.md", wallclock_markdown(results))
+    table = write_tables(rows, results, out, name="ablations",
+                         title=f"LAT ablations on {cfg.robot} ({cfg.preset_name} preset, {cfg.trials} trials per "
+                               "value; the seeds column counts trials)")
     if rows:
+        from hierloco.plots import plot_ablations
+
         per_value: dict = {}
         for row in rows:
             per_value.setdefault(row["ablation"], {}).setdefault(row["value"], []).append(row)
-        table = markdown_table(rows)
-        write_text(out / "ablations.csv", csv_text(rows, EPISODE_COLUMNS))
-        write_text(out / "ablations.md", f"# LAT ablations on {cfg.robot} ({cfg.preset_name} preset, {cfg.trials} "
-                                         "trials per value)\n\nNormalised cost, mean +- std over targets and trials."
-                                         "\n\n" + table)
         plot_ablations(per_value, out / "ablations.png", title=f"LAT ablations on {cfg.robot} ({cfg.trials} trials)")
         causes = paper_check.load_causes(cfg.causes) if cfg.causes is not None else []
         write_text(out / "paper_check.md", paper_check.paper_check_markdown(
@@ -115,8 +108,7 @@ def main(cfg) -> None:
                                                   "value (a trial's seed is its index)", causes=causes))
         print("\n" + table)
         print(f"ablation table, figure and the paper's claims checked (paper_check.md) in {out}/")
-    if studies.report_failures(results):
-        sys.exit(1)
+    end_study(results)
 
 
 if __name__ == "__main__":

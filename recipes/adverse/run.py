@@ -10,11 +10,9 @@ LAT's goal-reaching video under every fault to ``videos/``, in ``out_dir``; the 
 ``runs_dir/samples/<method>/<robot>_seed<seed>_n<count>`` (the fault runs to ``outputs/<method>/<preset>/``).
 """
 
-import hierloco  # noqa: F401  (first: headless MuJoCo rendering is set before anything loads MuJoCo)
+import hierloco  # noqa: F401  (first: the rendering backend is chosen before anything loads MuJoCo)
 
-import json
 import shutil
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -23,9 +21,9 @@ from hierloco.components.dynamics_data import TransitionData
 from hierloco.io import write_text
 from hierloco.plots import plot_samples
 from hierloco.results import EPISODE_COLUMNS, csv_text, markdown_table
-from recipes.common import studies
-from recipes.common.config import ConfigError, SETTINGS, as_lists
-from recipes.common.entry import recipe_main
+from hierloco.pipeline import studies
+from hierloco.pipeline.config import ConfigError, SETTINGS, as_lists
+from hierloco.pipeline.study import end_study, main_tasks, run_study, study_main
 
 def check(cfg) -> list:
     from hierloco.envs.robots import get_robot
@@ -127,12 +125,9 @@ def sample_jobs(cfg, robots) -> list:
     return jobs
 
 
-SUMMARY_TASKS = ("velocity_tracking", "goal_reaching", "trajectory_tracking")
-
-
-def fault_summary(results, methods, seeds: int) -> str:
+def fault_summary(results, methods, seeds: int, tasks) -> str:
     """One row per robot, profile and fault, one column per method: the normalised cost at velocity tracking (mean
-    +- std over targets and seeds) / goal reaching / trajectory tracking, and the goals reached; "not evaluable" where
+    +- std over targets and seeds) / goal reaching / trajectory tracking (the study's ``tasks``), and the goals reached; "not evaluable" where
     every seed's run failed with a finding (the reason is listed below the tables), and the number of seeds where
     fewer than ``seeds`` were evaluated."""
     costs: dict[tuple, list] = {}
@@ -159,7 +154,7 @@ def fault_summary(results, methods, seeds: int) -> str:
                 cells.append("not evaluable")
                 continue
             per_task = {task: np.array([r["normalized_cost"] for r in rows if r["task"] == task], dtype=float)
-                        for task in SUMMARY_TASKS}
+                        for task in tasks}
             text = " / ".join(f"{c.mean():.2f}" + (f" +- {c.std():.2f}" if i == 0 else "") if len(c) else "-"
                               for i, c in enumerate(per_task.values()))
             goals = [float(r["success"]) for r in rows if r["task"] == "goal_reaching"]
@@ -168,14 +163,6 @@ def fault_summary(results, methods, seeds: int) -> str:
             cells.append(text + (f", {evaluated} of {seeds} seeds" if evaluated < seeds else ""))
         lines.append(f"| {' | '.join(place)} | {' | '.join(cells)} |")
     return "\n".join(lines) + "\n"
-
-
-def _report(result) -> dict:
-    """The job's ``report.json``, from its run directory or its record (``{}`` if it has none)."""
-    try:
-        return json.loads((Path(result.source) / "report.json").read_text())
-    except (OSError, ValueError):
-        return {}
 
 
 def achievable_speeds(results) -> str:
@@ -190,7 +177,7 @@ def achievable_speeds(results) -> str:
             continue
         robot = result.rows[0]["robot"] if result.rows else "?"
         seed = result.rows[0]["seed"] if result.rows else "?"
-        for name, entry in sorted(_report(result).items()):
+        for name, entry in sorted(result.report.items()):
             if not name.startswith("dynamics_data_"):
                 continue
             speeds = entry.get("achievable_speeds")
@@ -212,7 +199,7 @@ def low_level_checks(results) -> str:
     lines = ["| robot | profile | run directory | experts reproduced within 0.05 m/s | median error m/s | fell |",
              "|---|---|---|---|---|---|"]
     for result in results:
-        check = _report(result).get("gait_policy_check")
+        check = result.report.get("gait_policy_check")
         if result.job.labels.get("method") != "lat" or not check or result.job.reuse_from:
             continue
         errors = np.asarray(check["reproduction_error"], dtype=float)
@@ -223,23 +210,17 @@ def low_level_checks(results) -> str:
     return "\n".join(lines) + "\n"
 
 
-def run(cfg, jobs) -> list:
-    return studies.run_jobs(jobs, address=cfg.ray.address, cores_per_job=cfg.ray.cores_per_job,
-                            fetch_run_dirs=cfg.ray.fetch_run_dirs, records=cfg.records, dry_run=cfg.dry_run)
-
-
-@recipe_main(__file__)
+@study_main(__file__)
 def main(cfg) -> None:
-    from recipes.common.report import wallclock_markdown
+    from hierloco.pipeline.report import wallclock_markdown
 
     robots = check(cfg)
     main_jobs, extra_jobs = fault_jobs(cfg, robots)
     samples = sample_jobs(cfg, robots)
     out = Path(cfg.out_dir)
-    results = run(cfg, main_jobs + extra_jobs + samples)  # a job starting from another's stages waits for it
+    results = run_study(cfg, main_jobs + extra_jobs + samples)  # a job starting from another's stages waits for it
     faults = len(main_jobs) + len(extra_jobs)
     fault_results, sample_results = results[:faults], results[faults:]
-    failed = studies.report_failures(fault_results + sample_results)
     write_text(out / "wallclock.md", wallclock_markdown(results))
     rows = [{**row, "setting": row["setting"] + ("" if row["profile"] == "own" else f"_{row['profile']}")}
             for row in studies.rows_of(fault_results)]
@@ -252,7 +233,8 @@ def main(cfg) -> None:
                                        f"{len(cfg.seeds)} seed(s))\n\nNormalised cost, mean +- std over targets and "
                                        "seeds; cells: velocity tracking / goal reaching / trajectory tracking "
                                        "(goals reached).\n\n"
-                                       + fault_summary(fault_results, list(cfg.methods), len(cfg.seeds))
+                                       + fault_summary(fault_results, list(cfg.methods), len(cfg.seeds),
+                                                       main_tasks(cfg))
                                        + "\n## Every task\n\nA setting `<fault>_<profile>` ran under that "
                                        "actuator profile (`stiff`, `stiff_servos`).\n\n"
                                        + table
@@ -277,8 +259,7 @@ def main(cfg) -> None:
         plot_samples(sample_rows, out / "samples.png",
                      title=f"Cost after damage (rear legs locked) against re-learning samples ({cfg.preset_name})")
     print(f"adverse tables and figures in {out}/")
-    if failed:
-        sys.exit(1)
+    end_study(results)
 
 
 if __name__ == "__main__":

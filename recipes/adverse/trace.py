@@ -27,8 +27,8 @@ from hierloco.envs.frames import wrap_angle
 from hierloco.io import write_text
 from hierloco.results import TaskEvaluation
 from hierloco.trained import load_run
-from recipes.common.config import make_task_from_spec
-from recipes.common.stages import evaluation_rollout
+from hierloco.pipeline.config import make_task_from_spec
+from hierloco.pipeline.stages import evaluation_rollout
 
 PLANNER_KEYS = ("name", "horizon", "num_candidates", "optim_steps", "top_k", "temperature")
 

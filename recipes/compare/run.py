@@ -12,18 +12,16 @@ finished runs are reused. Writes ``comparison.csv``, ``comparison.md``, ``wallcl
 claim that does not hold with the cause we checked, from the YAML file ``causes``) in ``out_dir``.
 """
 
-import hierloco  # noqa: F401  (first: headless MuJoCo rendering is set before anything loads MuJoCo)
+import hierloco  # noqa: F401  (first: the rendering backend is chosen before anything loads MuJoCo)
 
-import sys
 from pathlib import Path
 
 from omegaconf import OmegaConf
 
 from hierloco.io import write_text
-from recipes.common import studies
-from recipes.common.config import ConfigError, as_lists
-from recipes.common.entry import recipe_main
-from recipes.common.report import write_study_tables
+from hierloco.pipeline import studies
+from hierloco.pipeline.config import ConfigError, as_lists
+from hierloco.pipeline.study import end_study, main_tasks, rows_of, run_study, study_main, write_tables
 from recipes.compare import paper_check
 
 
@@ -101,23 +99,23 @@ def jobs(cfg, robots) -> list:
     return planned
 
 
-@recipe_main(__file__)
+@study_main(__file__)
 def main(cfg) -> None:
     robots = check(cfg)
-    results = studies.run_jobs(jobs(cfg, robots), address=cfg.ray.address, cores_per_job=cfg.ray.cores_per_job,
-                               fetch_run_dirs=cfg.ray.fetch_run_dirs, records=cfg.records, dry_run=cfg.dry_run)
-    rows = studies.rows_of(results)
+    results = run_study(cfg, jobs(cfg, robots))
+    rows = rows_of(results)
+    title = f"Normalised cost ({cfg.preset_name} preset, {seeds_text(cfg)})"
+    out = Path(cfg.out_dir)
+    table = write_tables(rows, results, out, name="comparison", title=title, settings=cfg.settings,
+                         tasks=main_tasks(cfg))
     if rows:
-        table = write_study_tables(rows, results, Path(cfg.out_dir), name="comparison", settings=cfg.settings,
-                                   title=f"Normalised cost ({cfg.preset_name} preset, {seeds_text(cfg)})")
         checks = paper_check.check_claims(rows, tuned_ik=OmegaConf.to_container(cfg.tuned_ik) if cfg.tuned_ik else None)
         causes = paper_check.load_causes(cfg.causes) if cfg.causes is not None else []
-        write_text(Path(cfg.out_dir) / "paper_check.md", paper_check.paper_check_markdown(
+        write_text(out / "paper_check.md", paper_check.paper_check_markdown(
             checks, title=f"{cfg.preset_name} preset, {seeds_text(cfg)}", causes=causes))
         print("\n" + table)
         print(f"comparison table, figures and the paper's claims checked (paper_check.md) in {cfg.out_dir}/")
-    if studies.report_failures(results):
-        sys.exit(1)
+    end_study(results)
 
 
 if __name__ == "__main__":

@@ -13,9 +13,8 @@ perturbation (``daisy_seed0-servo_latency0.04``), so studies of several gaps run
 tracking costs; then the full table and the perturbation used) and ``wallclock.md`` in ``out_dir``.
 """
 
-import hierloco  # noqa: F401  (first: headless MuJoCo rendering is set before anything loads MuJoCo)
+import hierloco  # noqa: F401  (first: the rendering backend is chosen before anything loads MuJoCo)
 
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -23,9 +22,9 @@ from omegaconf import OmegaConf
 
 from hierloco.io import write_text
 from hierloco.results import EPISODE_COLUMNS, csv_text, markdown_table
-from recipes.common import studies
-from recipes.common.config import ConfigError, as_lists
-from recipes.common.entry import recipe_main
+from hierloco.pipeline import studies
+from hierloco.pipeline.config import ConfigError, as_lists
+from hierloco.pipeline.study import end_study, missing_markdown, run_study, study_main
 
 SETTINGS = ("normal", "hardware_unadapted", "hardware")
 LABELS = {"normal": "nominal robot", "hardware_unadapted": "perturbed, nominal model",
@@ -117,15 +116,13 @@ def hardware_table(rows: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
-@recipe_main(__file__)
+@study_main(__file__)
 def main(cfg) -> None:
     from hierloco.envs.robots import hardware_options
-    from recipes.common.report import wallclock_markdown
+    from hierloco.pipeline.report import wallclock_markdown
 
     robots, options = check(cfg)
-    results = studies.run_jobs(jobs(cfg, robots, options), address=cfg.ray.address,
-                               cores_per_job=cfg.ray.cores_per_job, fetch_run_dirs=cfg.ray.fetch_run_dirs,
-                               records=cfg.records, dry_run=cfg.dry_run)
+    results = run_study(cfg, jobs(cfg, robots, options))
     rows = studies.rows_of(results)
     out = Path(cfg.out_dir)
     if rows:
@@ -137,12 +134,11 @@ def main(cfg) -> None:
                                         f"the nominal robot; CoM models from {cfg.num_transitions} samples. "
                                         f"Perturbation: {used}. Normalised costs, mean +- std over targets and "
                                         f"seeds; steps to goal over the goals reached.\n\n{summary}\n"
-                                        f"## Every task\n\n{markdown_table(rows)}")
+                                        f"## Every task\n\n{markdown_table(rows)}" + missing_markdown(results))
         write_text(out / "wallclock.md", wallclock_markdown(results))
         print("\n" + summary)
     print(f"hardware tables in {out}/")
-    if studies.report_failures(results):
-        sys.exit(1)
+    end_study(results)
 
 
 if __name__ == "__main__":

@@ -5,22 +5,22 @@ expert controller (Raibert footsteps + leg IK, closed loop), then MPC over the c
     python recipes/ik/train.py preset=small robot=daisy settings=[normal,legs_disabled]
 """
 
-import hierloco  # noqa: F401  (first: headless MuJoCo rendering is set before anything loads MuJoCo)
-from recipes.common.entry import recipe_main
-from recipes.common.run import open_run
-from utils import METHOD, checks, make_low_level, manifest, plan
+import hierloco  # noqa: F401  (first: the rendering backend is chosen before anything loads MuJoCo)
+from hierloco.pipeline import recipe_main
+from recipes.ik import utils
+from recipes.ik.utils import make_low_level
 
 
-@recipe_main(__file__)
-def main(cfg) -> float:
-    run = open_run(cfg, METHOD, plan, checks, manifest)  # config, every stage's key, lock: before any work
+@recipe_main(utils)  # config checked, every stage planned and its key checked, run directory locked: before any work
+def main(run) -> float:
+    plan = run.plan
 
-    low_level = make_low_level(run)                                 # command -> expert controller, closed loop
+    low_level = make_low_level(run)                               # command -> expert controller, closed loop
 
-    for setting in run.dynamics_settings:
-        data = run.stage(f"dynamics_data_{setting}", low_level)     # random commands chained (Sec. III-C)
-        model = run.stage(f"dynamics_model_{setting}", data, low_level(1))  # (dx, dy, dyaw, v') = f(v, command)
-        run.evaluate(setting, low_level, model)                     # MPC over the command box
+    for setting in plan.settings:
+        data = run.stage(setting.data, low_level)                 # random commands chained (Sec. III-C)
+        model = run.stage(setting.model, data, low_level(1))      # (dx, dy, dyaw, v') = f(v, command)
+        run.evaluate(setting.evaluations, low_level, model)       # MPC over the command box
 
     return run.finish()
 

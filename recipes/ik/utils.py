@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import inspect
 
-from recipes.common import config, stages
-from recipes.common.config import CONTINUOUS_PLANNERS
+from hierloco.pipeline import config, stages
+from hierloco.pipeline.plan import Plan
 
 METHOD = "ik"
 
@@ -17,7 +17,7 @@ def checks(c: config.Checker, robot) -> None:
 
     config.check_experts(c, robot, library=False)
     config.check_dynamics(c)
-    config.check_planner(c, CONTINUOUS_PLANNERS)
+    config.check_planner(c, "box")
     config.check_eval(c)
     config.check_logger(c)
     accepted = [p for cls in (CommandLowLevel, RaibertController) for p in inspect.signature(cls.__init__).parameters
@@ -39,9 +39,9 @@ def low_level_key(cfg, robot) -> dict:
             "controller": config.section(cfg, "controller")}
 
 
-def plan(cfg, robot) -> list[stages.Stage]:
+def plan(cfg, robot) -> Plan:
     """Per setting: dynamics data over velocity commands, model, one evaluation per task."""
-    return stages.per_setting_stages(cfg, low_level_key(cfg, robot), robot)
+    return Plan(settings=stages.per_setting_stages(cfg, low_level_key(cfg, robot), robot))
 
 
 def manifest(cfg, robot) -> dict:

@@ -7,27 +7,27 @@
 Every stage is cached in the run directory with its key: a re-run reuses finished stages, a killed run resumes.
 """
 
-import hierloco  # noqa: F401  (first: headless MuJoCo rendering is set before anything loads MuJoCo)
-from recipes.common.entry import recipe_main
-from recipes.common.run import open_run
-from utils import METHOD, checks, make_low_level, manifest, plan
+import hierloco  # noqa: F401  (first: the rendering backend is chosen before anything loads MuJoCo)
+from hierloco.pipeline import recipe_main
+from recipes.lat import utils
+from recipes.lat.utils import make_low_level
 
 
-@recipe_main(__file__)
-def main(cfg) -> float:
-    run = open_run(cfg, METHOD, plan, checks, manifest)  # config, every stage's key, lock: before any work
+@recipe_main(utils)  # config checked, every stage planned and its key checked, run directory locked: before any work
+def main(run) -> float:
+    plan = run.plan
 
-    library = run.stage("experts")                                  # G expert gaits (Sec. III-A)
-    trained = run.stage("gait_policy", library)                     # pi(t, z) and one z per expert (III-B)
-    low_level = make_low_level(run, trained)                        # z -> N joint targets, open loop
-    run.stage("gait_policy_check", low_level(1), library)           # pi(., z_g) walks like expert g
+    library = run.stage(plan.experts)                             # G expert gaits (Sec. III-A)
+    trained = run.stage(plan.gait_policy, library)                # pi(t, z) and one z per expert (III-B)
+    low_level = make_low_level(run, trained)                      # z -> N joint targets, open loop
+    run.stage(plan.gait_policy_check, low_level(1), library)      # pi(., z_g) walks like expert g
 
-    for setting in run.dynamics_settings:                           # normal, legs_disabled: the CoM model of each
-        data = run.stage(f"dynamics_data_{setting}", low_level)     # random z held one action each (III-C)
-        model = run.stage(f"dynamics_model_{setting}", data, low_level(1))  # (dx, dy, dyaw, v') = f(v, z)
-        run.evaluate(setting, low_level, model)                     # MPC over z on every task (III-D)
+    for setting in plan.settings:                                 # normal, legs_disabled: the CoM model of each
+        data = run.stage(setting.data, low_level)                 # random z held one action each (III-C)
+        model = run.stage(setting.model, data, low_level(1))      # (dx, dy, dyaw, v') = f(v, z)
+        run.evaluate(setting.evaluations, low_level, model)       # MPC over z on every task (III-D)
 
-    return run.finish(low_level(1))                                 # tables, figures, videos; headline cost
+    return run.finish(low_level(1))                               # tables, figures, videos; headline cost
 
 
 if __name__ == "__main__":

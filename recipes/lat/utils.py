@@ -1,13 +1,13 @@
 """Factories of the LAT recipe: its plan of stages, its low level and its config checks.
 
 The stages themselves (experts, gait policy, dynamics, evaluation) are shared with the other recipes and live in
-``recipes/common/stages.py``; only recipe code reads the config, the library takes keyword arguments.
+``hierloco/pipeline/stages.py``; only recipe code reads the config, the library takes keyword arguments.
 """
 
 from __future__ import annotations
 
-from recipes.common import config, stages
-from recipes.common.config import CONTINUOUS_PLANNERS
+from hierloco.pipeline import config, stages
+from hierloco.pipeline.plan import Plan
 
 METHOD = "lat"
 
@@ -16,20 +16,19 @@ def checks(c: config.Checker, robot) -> None:
     config.check_experts(c, robot)
     config.check_policy(c)
     config.check_dynamics(c)
-    config.check_planner(c, CONTINUOUS_PLANNERS)
+    config.check_planner(c, "box")
     config.check_eval(c)
     config.check_logger(c)
 
 
-def plan(cfg, robot) -> list[stages.Stage]:
+def plan(cfg, robot) -> Plan:
     """Experts -> gait policy -> its check -> per setting: dynamics data, model, one evaluation per task."""
     from hierloco.envs.robots import robot_fingerprint
 
     experts = stages.experts_stage(cfg, robot_fingerprint(robot))
     policy = stages.gait_policy_stage(cfg, experts)
-    low_level = stages.latent_low_level(policy)
-    return [experts, policy, stages.gait_policy_check_stage(cfg, policy),
-            *stages.per_setting_stages(cfg, low_level, robot)]
+    return Plan(experts=experts, gait_policy=policy, gait_policy_check=stages.gait_policy_check_stage(cfg, policy),
+                settings=stages.per_setting_stages(cfg, stages.latent_low_level(policy), robot))
 
 
 def manifest(cfg, robot) -> dict:

@@ -5,23 +5,23 @@ over the expert index, exhaustive MPC over the experts.
     python recipes/lib/train.py preset=small robot=daisy
 """
 
-import hierloco  # noqa: F401  (first: headless MuJoCo rendering is set before anything loads MuJoCo)
-from recipes.common.entry import recipe_main
-from recipes.common.run import open_run
-from utils import METHOD, checks, make_low_level, manifest, plan
+import hierloco  # noqa: F401  (first: the rendering backend is chosen before anything loads MuJoCo)
+from hierloco.pipeline import recipe_main
+from recipes.lib import utils
+from recipes.lib.utils import make_low_level
 
 
-@recipe_main(__file__)
-def main(cfg) -> float:
-    run = open_run(cfg, METHOD, plan, checks, manifest)  # config, every stage's key, lock: before any work
+@recipe_main(utils)  # config checked, every stage planned and its key checked, run directory locked: before any work
+def main(run) -> float:
+    plan = run.plan
 
-    library = run.stage("experts")                                  # G expert gaits (Sec. III-A)
-    low_level = make_low_level(library)                             # action g: replay expert g
+    library = run.stage(plan.experts)                             # G expert gaits (Sec. III-A)
+    low_level = make_low_level(library)                           # action g: replay expert g
 
-    for setting in run.dynamics_settings:
-        data = run.stage(f"dynamics_data_{setting}", low_level)     # random experts chained (III-C)
-        model = run.stage(f"dynamics_model_{setting}", data, low_level(1))  # over one-hot expert indices
-        run.evaluate(setting, low_level, model)                     # exhaustive MPC over the G experts
+    for setting in plan.settings:
+        data = run.stage(setting.data, low_level)                 # random experts chained (III-C)
+        model = run.stage(setting.model, data, low_level(1))      # over one-hot expert indices
+        run.evaluate(setting.evaluations, low_level, model)       # exhaustive MPC over the G experts
 
     return run.finish()
 

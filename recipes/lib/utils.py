@@ -3,7 +3,8 @@ level (the experts replayed) and its config checks."""
 
 from __future__ import annotations
 
-from recipes.common import config, stages
+from hierloco.pipeline import config, stages
+from hierloco.pipeline.plan import Plan
 
 METHOD = "lib"
 
@@ -11,18 +12,18 @@ METHOD = "lib"
 def checks(c: config.Checker, robot) -> None:
     config.check_experts(c, robot)
     config.check_dynamics(c)
-    config.check_planner(c, ("exhaustive",))
+    config.check_planner(c, "finite")
     config.check_eval(c)
     config.check_logger(c)
 
 
-def plan(cfg, robot) -> list[stages.Stage]:
+def plan(cfg, robot) -> Plan:
     """Experts -> per setting: dynamics data over expert indices, model, one evaluation per task."""
     from hierloco.envs.robots import robot_fingerprint
 
     experts = stages.experts_stage(cfg, robot_fingerprint(robot))
     low_level = {"kind": "expert_replay", "experts": experts.digest}
-    return [experts, *stages.per_setting_stages(cfg, low_level, robot)]
+    return Plan(experts=experts, settings=stages.per_setting_stages(cfg, low_level, robot))
 
 
 def manifest(cfg, robot) -> dict:

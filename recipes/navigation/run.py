@@ -9,16 +9,16 @@ Writes ``navigation.json`` (tracking cost, distance to the path, clearance from 
 
 from __future__ import annotations
 
-import hierloco  # noqa: F401  (first: headless MuJoCo rendering is set before anything loads MuJoCo)
+import hierloco  # noqa: F401  (first: the rendering backend is chosen before anything loads MuJoCo)
 import json
 from pathlib import Path
 
 import numpy as np
 from omegaconf import DictConfig
 
-from recipes.common import studies  # noqa: E402
-from recipes.common.config import ConfigError  # noqa: E402
-from recipes.common.entry import recipe_main  # noqa: E402
+from hierloco.pipeline import studies  # noqa: E402
+from hierloco.pipeline.config import ConfigError  # noqa: E402
+from hierloco.pipeline.study import study_main  # noqa: E402
 from hierloco.components.evaluation import run_task  # noqa: E402
 from hierloco.envs.latent_env import LatentActionEnv  # noqa: E402
 from hierloco.envs.navigation import clearance, cluttered_arena, plan_path  # noqa: E402
@@ -42,7 +42,7 @@ def validate(cfg: DictConfig) -> None:
         raise ConfigError("bad config: " + "; ".join(problems))
 
 
-@recipe_main(__file__)
+@study_main(__file__)
 def main(cfg: DictConfig) -> None:
     validate(cfg)
     arena = cluttered_arena(seed=cfg.arena.seed, num_obstacles=cfg.arena.num_obstacles, goal=tuple(cfg.arena.goal))
@@ -71,7 +71,12 @@ def main(cfg: DictConfig) -> None:
     write_text(out / "navigation.json", json.dumps(result, indent=2))
     plot_navigation(arena, path, com, out / "navigation.png", inflation=cfg.inflation,
                     title=f"LAT {cfg.robot}: navigation (arena {cfg.arena.seed})")
-    if cfg.video:
+    from hierloco import render_backend
+
+    why = render_backend.unavailable() if cfg.video else None
+    if why is not None:
+        print(f"no video: {why}")
+    elif cfg.video:
         frames = render_frames(cfg.robot, rollout.qpos[0, ::5], obstacles=arena.obstacles,
                                markers=path[:: max(1, len(path) // 40)], distance=3.0, elevation=-45)
         save_video(frames, out / "navigation.mp4", fps=20)

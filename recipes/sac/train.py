@@ -8,25 +8,25 @@ The SAC training loop is :func:`hierloco.components.sac.train_sac` (one loop for
 level), run by ``utils.train_high_level`` on the env and agent it builds.
 """
 
-import hierloco  # noqa: F401  (first: headless MuJoCo rendering is set before anything loads MuJoCo)
-from recipes.common.entry import recipe_main
-from recipes.common.run import open_run
-from utils import METHOD, checks, make_low_level, manifest, plan
+import hierloco  # noqa: F401  (first: the rendering backend is chosen before anything loads MuJoCo)
+from hierloco.pipeline import recipe_main
+from recipes.sac import utils
+from recipes.sac.utils import make_low_level
 
 
-@recipe_main(__file__)
-def main(cfg) -> float:
-    run = open_run(cfg, METHOD, plan, checks, manifest)  # config, every stage's key, lock: before any work
+@recipe_main(utils)  # config checked, every stage planned and its key checked, run directory locked: before any work
+def main(run) -> float:
+    plan = run.plan
 
-    library = run.stage("experts")                                  # G expert gaits (Sec. III-A)
-    trained = run.stage("gait_policy", library)                     # pi(t, z) and one z per expert (III-B)
-    low_level = make_low_level(run, trained)                        # z -> N joint targets, open loop
-    run.stage("gait_policy_check", low_level(1), library)
+    library = run.stage(plan.experts)                             # G expert gaits (Sec. III-A)
+    trained = run.stage(plan.gait_policy, library)                # pi(t, z) and one z per expert (III-B)
+    low_level = make_low_level(run, trained)                      # z -> N joint targets, open loop
+    run.stage(plan.gait_policy_check, low_level(1), library)
 
-    for name in cfg.eval.tasks:                                     # one SAC high level per task (IV-B)
-        agent = run.stage(f"sac_{name}", low_level)                 # trained on half of the task's targets
-        for evaluation in run.dependents(f"sac_{name}"):            # tested on all of them, and on the
-            run.stage(evaluation, agent, low_level)                 # task's generalisation variants
+    for task in plan.tasks:                                       # one SAC high level per task (IV-B)
+        agent = run.stage(task.agent, low_level)                  # trained on half of the task's targets
+        for evaluation in task.evaluations:                       # tested on all of them, and on the
+            run.stage(evaluation, agent, low_level)               # task's generalisation variants
 
     return run.finish(low_level(1))
 

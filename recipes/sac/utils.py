@@ -13,8 +13,11 @@ from hierloco.components.sac import SACAgent, train_sac
 from hierloco.envs.latent_env import LatentActionEnv
 from hierloco.envs.tasks import Task
 from hierloco.envs.transforms import GoalObservation, task_transforms
-from recipes.common import config, report, stages
-from recipes.common.config import make_task_from_spec, section
+from hierloco.pipeline import config, report, stages
+from hierloco.pipeline.config import make_task_from_spec, section, task_specs
+from hierloco.pipeline.plan import Plan, Stage, TaskPlan
+from hierloco.pipeline.rundir import digest
+from hierloco.results import TaskEvaluation
 
 METHOD = "sac"
 
@@ -39,27 +42,26 @@ def check_high_level(c: config.Checker) -> None:
         c.fail(f"the SAC high level runs the normal setting only, got settings={list(c.cfg.settings)}")
 
 
-def plan(cfg, robot) -> list[stages.Stage]:
+def plan(cfg, robot) -> Plan:
     """Experts -> gait policy -> its check -> the SAC high level per main task, over z."""
     from hierloco.envs.robots import robot_fingerprint
 
     experts = stages.experts_stage(cfg, robot_fingerprint(robot))
     policy = stages.gait_policy_stage(cfg, experts)
-    return [experts, policy, stages.gait_policy_check_stage(cfg, policy),
-            *high_level_stages(cfg, stages.latent_low_level(policy))]
+    return Plan(experts=experts, gait_policy=policy, gait_policy_check=stages.gait_policy_check_stage(cfg, policy),
+                tasks=high_level_stages(cfg, stages.latent_low_level(policy)))
 
 
-def high_level_stages(cfg, low_level: dict) -> list[stages.Stage]:
+def high_level_stages(cfg, low_level: dict) -> list[TaskPlan]:
     """Per main task a SAC agent (``sac_<task>``), then its evaluation on every task of the same kind (the main
     task and its generalisation variants)."""
     planned = []
-    specs = stages.task_specs(cfg)
+    specs = task_specs(cfg)
     for name in cfg.eval.tasks:
         agent = sac_stage(cfg, name, specs[name], low_level)
-        planned.append(agent)
-        for other, spec in specs.items():
-            if task_kind(other, spec) == task_kind(name, specs[name]):
-                planned.append(sac_evaluation_stage(cfg, other, spec, agent))
+        evaluations = [sac_evaluation_stage(cfg, other, spec, agent) for other, spec in specs.items()
+                       if task_kind(other, spec) == task_kind(name, specs[name])]
+        planned.append(TaskPlan(name, agent, evaluations))
     return planned
 
 
@@ -67,21 +69,20 @@ def task_kind(name: str, spec: dict) -> str:
     return (spec or {}).get("task", name)
 
 
-def sac_stage(cfg, name: str, spec: dict, low_level: dict) -> stages.Stage:
+def sac_stage(cfg, name: str, spec: dict, low_level: dict) -> Stage:
     """The SAC agent of task ``name``, trained on its training split whichever split is evaluated (``split: train``
     evaluates the training targets only, as tuning does: the same agent, so its key leaves the split out)."""
     trained_on = {k: v for k, v in spec.items() if k != "split"}
     params = {"seed": cfg.seed, "device": cfg.device, "task_name": name, "task": trained_on, **section(cfg, "sac")}
-    return stages.Stage(f"sac_{name}", params, {"low_level": low_level}, f"sac_{name}.pt", SACAgent,
-                        train_high_level)
+    return Stage(f"sac_{name}", params, {"low_level": low_level}, f"sac_{name}.pt", SACAgent, train_high_level)
 
 
-def sac_evaluation_stage(cfg, name: str, spec: dict, agent: stages.Stage) -> stages.Stage:
+def sac_evaluation_stage(cfg, name: str, spec: dict, agent: Stage) -> Stage:
     params = {"seed": cfg.seed, "setting": "normal", "task_name": name, "task": spec}
     after = {"agent": agent.digest}
-    key_digest = stages.digest({"params": params, "after": after})
-    return stages.Stage(f"evaluation_normal_{name}", params, after, f"evaluation/normal/{name}-{key_digest}.npz",
-                        stages.TaskEvaluation, build_evaluation)
+    key_digest = digest({"params": params, "after": after})
+    return Stage(f"evaluation_normal_{name}", params, after, f"evaluation/normal/{name}-{key_digest}.npz",
+                 TaskEvaluation, build_evaluation)
 
 
 def task_env(low_level, task: Task, num_robots: int, seed: int, nthread: int | None = None) -> TransformedEnv:
@@ -112,7 +113,7 @@ def train_high_level(run, params, make_low_level) -> SACAgent:
     return agent
 
 
-def build_evaluation(run, params, agent: SACAgent, make_low_level) -> stages.TaskEvaluation:
+def build_evaluation(run, params, agent: SACAgent, make_low_level) -> TaskEvaluation:
     """The trained policy (its mean action) on every target of a task, one robot per episode."""
     task = make_task_from_spec(params["task_name"], params["task"])
     env = LatentActionEnv(make_low_level(task.num_episodes), num_robots=task.num_episodes, record=True,

@@ -36,7 +36,7 @@ def tracking_markdown(report: dict) -> str:
 
 def learning_curve_markdown(curve: list[dict]) -> str:
     """The curve as a table; with a wall-clock column when its points have one (a run directory's artifacts keep
-    no wall-clock, see ``recipes/common/run.py``)."""
+    no wall-clock, see ``hierloco/pipeline/run.py``)."""
     timed = all("seconds" in p for p in curve)
     lines = ["| frames |" + (" wall-clock s |" if timed else "") + " updates | reward/step | tracking error m/s | "
              "falls per 1000 frames |", "|---|---|---|---|---|" + ("---|" if timed else "")]
@@ -140,7 +140,7 @@ def write_low_level_report(out: Path, robot: str, metadata: dict, tracking: dict
 
 def main(argv=None) -> None:
     from hierloco.components.sac_low_level import TrainedSACLowLevel
-    from hierloco.runs import RunDirectory
+    from hierloco.pipeline.rundir import RunDirectory
 
     argv = sys.argv[1:] if argv is None else argv
     if len(argv) != 2:

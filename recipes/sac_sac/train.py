@@ -5,24 +5,24 @@ a goal-conditioned SAC high level over the command, trained on half of the task'
     python recipes/sac_sac/train.py preset=small robot=daisy
 """
 
-import hierloco  # noqa: F401  (first: headless MuJoCo rendering is set before anything loads MuJoCo)
-from recipes.common.entry import recipe_main
-from recipes.common.run import open_run
-from utils import METHOD, checks, make_low_level, manifest, plan
+import hierloco  # noqa: F401  (first: the rendering backend is chosen before anything loads MuJoCo)
+from hierloco.pipeline import recipe_main
+from recipes.sac_sac import utils
+from recipes.sac_sac.utils import make_low_level
 
 
-@recipe_main(__file__)
-def main(cfg) -> float:
-    run = open_run(cfg, METHOD, plan, checks, manifest)  # config, every stage's key, lock: before any work
+@recipe_main(utils)  # config checked, every stage planned and its key checked, run directory locked: before any work
+def main(run) -> float:
+    plan = run.plan
 
-    trained = run.stage("sac_low_level")                             # SAC at 100 Hz tracks velocity commands
-    low_level = make_low_level(run, trained)                         # command -> the SAC policy, closed loop
-    run.stage("sac_low_level_tracking", low_level)                   # its tracking error per command
+    trained = run.stage(plan.low_level)                           # SAC at 100 Hz tracks velocity commands
+    low_level = make_low_level(run, trained)                      # command -> the SAC policy, closed loop
+    run.stage(plan.low_level_tracking, low_level)                 # its tracking error per command
 
-    for name in cfg.eval.tasks:                                      # one SAC high level per task, over the command
-        agent = run.stage(f"sac_{name}", low_level)                  # on half of the task's targets
-        for evaluation in run.dependents(f"sac_{name}"):             # tested on all of them, and on the
-            run.stage(evaluation, agent, low_level)                  # task's generalisation variants
+    for task in plan.tasks:                                       # one SAC high level per task, over the command
+        agent = run.stage(task.agent, low_level)                  # on half of the task's targets
+        for evaluation in task.evaluations:                       # tested on all of them, and on the
+            run.stage(evaluation, agent, low_level)               # task's generalisation variants
 
     return run.finish()
 

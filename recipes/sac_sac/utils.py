@@ -10,14 +10,15 @@ from hierloco.components.sac_low_level import (
     evaluate_velocity_tracking,
     train_sac_low_level,
 )
-from recipes.common import config, stages
+from hierloco.pipeline import config
+from hierloco.pipeline.plan import JsonReport, Plan, Stage
 from recipes.sac_sac.report import write_low_level_report
 from recipes.sac import utils as sac
 
 METHOD = "sac_sac"
 
 
-class TrackingReport(stages.JsonReport):
+class TrackingReport(JsonReport):
     SCHEMA = {"rows": list, "summary": dict}
 
 
@@ -35,18 +36,18 @@ def checks(c: config.Checker, robot) -> None:
         c.positive(key)
 
 
-def plan(cfg, robot) -> list[stages.Stage]:
+def plan(cfg, robot) -> Plan:
     """SAC low level -> its tracking report -> per main task: a SAC high level over the command, its evaluations."""
     from hierloco.envs.robots import robot_fingerprint
 
-    low = stages.Stage("sac_low_level", {"seed": cfg.seed, **config.section(cfg, "low_level")},
+    low = Stage("sac_low_level", {"seed": cfg.seed, **config.section(cfg, "low_level")},
                        {"robot": robot_fingerprint(robot)}, "sac_low_level.pt", TrainedSACLowLevel, build_low_level)
-    report = stages.Stage("sac_low_level_tracking", {"seed": cfg.seed, "steps_per_action": cfg.steps_per_action,
+    report = Stage("sac_low_level_tracking", {"seed": cfg.seed, "steps_per_action": cfg.steps_per_action,
                                                      "actor": cfg.low_level_actor, **config.section(cfg, "tracking")},
                           {"sac_low_level": low.digest}, "sac_low_level_tracking.json", TrackingReport, build_tracking)
     low_level = {"kind": "sac_command", "sac_low_level": low.digest, "steps_per_action": cfg.steps_per_action,
                  "actor": cfg.low_level_actor}
-    return [low, report, *sac.high_level_stages(cfg, low_level)]
+    return Plan(low_level=low, low_level_tracking=report, tasks=sac.high_level_stages(cfg, low_level))
 
 
 def build_low_level(run, params) -> TrainedSACLowLevel:

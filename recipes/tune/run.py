@@ -14,18 +14,17 @@ lower learning rate). Writes ``tune.csv``, ``tune.md`` (per robot and candidate:
 of every task and their mean, the best candidate marked) and ``wallclock.md`` in ``out_dir``.
 """
 
-import hierloco  # noqa: F401  (first: headless MuJoCo rendering is set before anything loads MuJoCo)
+import hierloco  # noqa: F401  (first: the rendering backend is chosen before anything loads MuJoCo)
 
-import sys
 from pathlib import Path
 
 import numpy as np
 
 from hierloco.io import write_text
 from hierloco.results import EPISODE_COLUMNS, csv_text
-from recipes.common import studies
-from recipes.common.config import ConfigError, as_lists
-from recipes.common.entry import recipe_main
+from hierloco.pipeline import studies
+from hierloco.pipeline.config import ConfigError, as_lists
+from hierloco.pipeline.study import end_study, missing_markdown, run_study, study_main
 from recipes.compare.paper_check import seed_means
 
 
@@ -98,13 +97,12 @@ def tune_table(rows: list[dict], tasks) -> tuple[str, dict]:
     return "\n".join(lines) + "\n", best
 
 
-@recipe_main(__file__)
+@study_main(__file__)
 def main(cfg) -> None:
-    from recipes.common.report import wallclock_markdown
+    from hierloco.pipeline.report import wallclock_markdown
 
     robots = check(cfg)
-    results = studies.run_jobs(jobs(cfg, robots), address=cfg.ray.address, cores_per_job=cfg.ray.cores_per_job,
-                               fetch_run_dirs=cfg.ray.fetch_run_dirs, records=cfg.records, dry_run=cfg.dry_run)
+    results = run_study(cfg, jobs(cfg, robots))
     rows = studies.rows_of(results)
     out = Path(cfg.out_dir)
     if rows:
@@ -114,12 +112,11 @@ def main(cfg) -> None:
         write_text(out / "tune.md", f"# Tuning {cfg.method.upper()} on the training targets ({cfg.preset_name} "
                                     f"preset, seeds {list(cfg.seeds)})\n\nNormalised cost on each task's training "
                                     f"split, mean +- std over seeds; the best candidate has the lowest mean.\n\n"
-                                    f"{table}\nBest: {chosen}.\n")
+                                    f"{table}\nBest: {chosen}.\n" + missing_markdown(results))
         write_text(out / "wallclock.md", wallclock_markdown(results))
         print("\n" + table + f"\nbest: {chosen}")
     print(f"tuning table in {out}/")
-    if studies.report_failures(results):
-        sys.exit(1)
+    end_study(results)
 
 
 if __name__ == "__main__":

@@ -117,7 +117,7 @@ def test_bad_profile_overrides_are_refused_before_any_job():
     import pytest
 
     from recipes.adverse import run
-    from recipes.common.config import ConfigError
+    from hierloco.pipeline.config import ConfigError
 
     with pytest.raises(ConfigError, match="unknown robot profile 'sticky' in profile_overrides"):
         run.check(adverse_config("robots=[a1]", "+profile_overrides.sticky={lat: []}"))
@@ -127,7 +127,7 @@ def test_bad_profile_overrides_are_refused_before_any_job():
 
 def test_sample_counts_build_the_low_level_once_when_the_paper_run_is_not_on_disk(tmp_path, monkeypatch):
     from recipes.adverse import run
-    from recipes.common import studies
+    from hierloco.pipeline import studies
 
     monkeypatch.chdir(tmp_path)
     cfg = adverse_config("robots=[a1]", "seeds=[0]", "sample_methods=[lat]", "samples=[200,500,2000]")

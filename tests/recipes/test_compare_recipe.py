@@ -60,7 +60,7 @@ def test_compare_through_ray_equals_the_jobs_one_by_one(tmp_path):
     wallclock = (by_ray / "out" / "wallclock.md").read_text()
     assert "| lib | a1 | 2 |" in wallclock and "| ik | a1 | 2 |" in wallclock, wallclock
     assert wallclock.count("| 0 | yes |") == 4, wallclock  # every job reused, no stage without its build time
-    from recipes.common.report import job_compute
+    from hierloco.pipeline.report import job_compute
 
     stages, _ = job_compute(str(by_ray / "outputs" / "ik" / "tiny" / "a1_seed0"))
     assert "dynamics_data_normal" in stages and all(v is not None and v > 0 for v in stages.values()), stages
@@ -114,7 +114,7 @@ def test_compare_through_ray_equals_the_jobs_one_by_one(tmp_path):
 
     # a finished job is reused only while every stage its recipe plans today has the key on disk: a stage made
     # with another config (as after a changed default) makes it run again, and the run names that stage
-    from recipes.common.studies import Job, finished
+    from hierloco.pipeline.studies import Job, finished
 
     run_dir = by_ray / "outputs" / "ik" / "tiny" / "a1_seed1"
     job = Job("ik", str(run_dir), json.loads((run_dir / "job.json").read_text())["signature"]["overrides"])
@@ -170,7 +170,7 @@ def test_method_seeds_give_a_method_its_own_seeds():
     ("sac=0", "method_seeds.sac must be a non-empty list of seeds, got 0"),
 ])
 def test_bad_method_seeds_are_refused_before_any_job(method_seeds, message):
-    from recipes.common.config import ConfigError
+    from hierloco.pipeline.config import ConfigError
     from recipes.compare import run
 
     cfg = compare_config("methods=[lat,sac]", "robots=[a1]", f"+method_seeds.{method_seeds}")
@@ -179,7 +179,7 @@ def test_bad_method_seeds_are_refused_before_any_job(method_seeds, message):
 
 
 def test_a_bad_causes_file_is_refused_before_any_job(tmp_path):
-    from recipes.common.config import ConfigError
+    from hierloco.pipeline.config import ConfigError
     from recipes.compare import run
 
     causes = tmp_path / "causes.yaml"

@@ -33,7 +33,7 @@ def test_hardware_tiny(tmp_path):
     assert len(hardware) == 50 and not np.allclose(normal.next_com_state, hardware.next_com_state)
     key = json.loads(next((run / "evaluation" / "hardware_unadapted").glob("goal_reaching-*.key.json")).read_text())
     normal_model = json.loads((run / "dynamics_model_normal.pt.key.json").read_text())
-    from hierloco.runs import digest
+    from hierloco.pipeline.rundir import digest
 
     assert key["after"]["model"] == digest(normal_model), "planned with the nominal robot's CoM model"
     assert key["params"]["hardware"]["servo_latency"] == 0.04

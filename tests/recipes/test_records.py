@@ -1,4 +1,4 @@
-"""Job records (``recipes/common/records.py``): where a job's record goes, what it holds, when it counts as current.
+"""Job records (``hierloco/pipeline/records.py``): where a job's record goes, what it holds, when it counts as current.
 The study-level behaviour (a study taken whole from records on another machine) is in ``test_compare_recipe.py``."""
 
 import json
@@ -8,10 +8,10 @@ from pathlib import Path
 
 import pytest
 
-from hierloco.runs import StageSpec, normalized
-from recipes.common import records
-from recipes.common.config import ConfigError
-from recipes.common.studies import check_records
+from hierloco.pipeline.rundir import StageSpec, normalized
+from hierloco.pipeline import records
+from hierloco.pipeline.config import ConfigError
+from hierloco.pipeline.studies import check_records
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -13,7 +13,7 @@ import pytest
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf, open_dict
 
-from recipes.common.config import prepare
+from hierloco.pipeline.config import prepare
 
 ROOT = Path(__file__).resolve().parents[2]
 RECIPES = ("lat", "lib", "ik", "sac", "sac_sac")

@@ -1,5 +1,5 @@
 """A study's job subprocess dies with the worker that runs it, so a killed study leaves no recipe running on
-(``recipes.common.studies.die_with_parent``, called by every recipe as it starts)."""
+(``hierloco.pipeline.studies.die_with_parent``, called by every recipe as it starts)."""
 
 import os
 import signal
@@ -9,7 +9,7 @@ import time
 
 import pytest
 
-CHILD = "from recipes.common.studies import die_with_parent; die_with_parent(); import time; time.sleep(120)"
+CHILD = "from hierloco.pipeline.studies import die_with_parent; die_with_parent(); import time; time.sleep(120)"
 PARENT = f"""
 import os, subprocess, sys, time
 env = {{**os.environ, "HIERLOCO_PARENT_PID": str(os.getpid())}}

@@ -2,7 +2,7 @@
 
 import time
 
-from recipes.common.studies import _progress
+from hierloco.pipeline.studies import _progress
 
 
 def test_estimate_counts_down_from_the_last_job_end():

@@ -90,7 +90,7 @@ def test_every_recipe_reports_mistakes_the_same_way(tmp_path, monkeypatch, recip
 def test_a_list_option_given_a_scalar_is_a_one_item_list():
     from omegaconf import OmegaConf
 
-    from recipes.common.config import as_lists
+    from hierloco.pipeline.config import as_lists
 
     cfg = OmegaConf.create({"settings": "normal", "eval": {"videos": None}, "logger": {"backends": ["csv"]}})
     as_lists(cfg, ("settings", "eval.videos", "logger.backends"))

@@ -1,14 +1,68 @@
 """MPC planners over any action box and any learned world model (Li et al., RA-L 2021, Sec. III-A.2: random
-shooting with 8000 samples over a horizon of 1; CEM, MPPI with warm starts and exhaustive search are options)."""
+shooting with 8000 samples over a horizon of 1; CEM, MPPI with warm starts and exhaustive search are options).
 
-from hierloco.components.planners.base import BoxPlannerBase
+Planners are found by name in :data:`PLANNERS` (``planner.name`` in a recipe's config); :func:`make_planner` builds
+one from a config section shared by every planner, each taking its own options from it.
+
+Example:
+    >>> PLANNERS.names()
+    ['cem', 'exhaustive', 'mppi', 'random_shooting']
+    >>> PLANNERS.options("cem")
+    {'num_candidates': 1000, 'optim_steps': 5, 'top_k': 50}
+"""
+
+from __future__ import annotations
+
+from typing import Any, Mapping
+
+from hierloco.components.planners.base import PLANNERS, BoxPlannerBase
 from hierloco.components.planners.cem import BoxCEMPlanner
 from hierloco.components.planners.exhaustive import ExhaustivePlanner
 from hierloco.components.planners.mppi import BoxMPPIPlanner
 from hierloco.components.planners.random_shooting import RandomShootingPlanner
 
-PLANNERS = {"random_shooting": RandomShootingPlanner, "cem": BoxCEMPlanner, "mppi": BoxMPPIPlanner,
-            "exhaustive": ExhaustivePlanner}
+COMMON = ("name", "horizon")  # keys of a planner section that are not any one planner's options
+
+
+def make_planner(world_model, *, name: str = "random_shooting", horizon: int = 1, seed: int = 0, **options):
+    """The planner registered as ``name`` over ``world_model``, looking ``horizon`` actions ahead.
+
+    ``options`` may hold the options of every planner (one config section serves them all): each planner takes
+    its own (:meth:`hierloco.registry.Registry.options`) and ignores the others."""
+    cls = PLANNERS[name]
+    own = PLANNERS.select(name, options)
+    if "finite" in cls.ACTION_SPACES and "box" not in cls.ACTION_SPACES:
+        return cls(world_model, planning_horizon=horizon, **own)
+    return cls(world_model, planning_horizon=horizon, seed=seed, **own)
+
+
+def check_planner_options(name: str, section: Mapping[str, Any], *, action_space: str = "box") -> list[str]:
+    """Problems with a planner section: keys that are no registered planner's option, values of the selected
+    planner's options unlike their defaults, and what the planner's constructor refuses (built on a stand-in world
+    model). Empty when all is well."""
+    import torch
+
+    from hierloco.envs.world_model import CoMWorldModelEnv
+
+    known = {option for other in PLANNERS.names() for option in PLANNERS.options(other)}
+    problems = [f"planner has no option {key!r} (the planners' options: {', '.join(sorted(known))})"
+                for key in section if key not in known and key not in COMMON]
+    own = PLANNERS.select(name, section)
+    problems += PLANNERS.check_options(name, own)
+    if problems:
+        return problems
+
+    class _Still(torch.nn.Module):
+        def predict(self, com_state, action):
+            return com_state
+
+    box = {"num_choices": 2} if action_space == "finite" else {"action_low": [-1.0], "action_high": [1.0]}
+    try:
+        make_planner(CoMWorldModelEnv(_Still(), **box), name=name, horizon=int(section.get("horizon", 1)), **own)
+    except (TypeError, ValueError) as error:
+        problems.append(f"planner {name!r}: {error}")
+    return problems
+
 
 __all__ = ["PLANNERS", "BoxCEMPlanner", "BoxMPPIPlanner", "BoxPlannerBase", "ExhaustivePlanner",
-           "RandomShootingPlanner"]
+           "RandomShootingPlanner", "check_planner_options", "make_planner"]

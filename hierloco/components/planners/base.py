@@ -15,6 +15,11 @@ from torchrl.data import Categorical
 from torchrl.modules.planners import MPCPlannerBase
 
 from hierloco.components.policies import TaskPolicy
+from hierloco.registry import Registry
+
+# The planners by name (``planner.name``): a new planner is one subclass of :class:`BoxPlannerBase` decorated with
+# ``@PLANNERS.register("name")``; its options are its constructor's keyword arguments (``docs/extending.md``).
+PLANNERS = Registry("planner", context=("env", "planning_horizon", "seed", "choices"))
 
 
 class BoxPlannerBase(MPCPlannerBase, TaskPolicy):
@@ -27,6 +32,8 @@ class BoxPlannerBase(MPCPlannerBase, TaskPolicy):
         num_candidates: S, action sequences scored per call and per robot.
         seed: seeds the planner's own random generator.
     """
+
+    ACTION_SPACES = ("box",)  # what it plans over: "box" (a continuous box), "finite" (a set of choices)
 
     def __init__(self, env, planning_horizon: int = 1, num_candidates: int = 8000, seed: int = 0):
         super().__init__(env)

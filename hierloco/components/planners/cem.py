@@ -5,9 +5,10 @@ from __future__ import annotations
 import torch
 from tensordict import TensorDictBase
 
-from hierloco.components.planners.base import BoxPlannerBase
+from hierloco.components.planners.base import PLANNERS, BoxPlannerBase
 
 
+@PLANNERS.register("cem")
 class BoxCEMPlanner(BoxPlannerBase):
     """CEM: Gaussian sampling around a mean plan, refit to the ``top_k`` best sequences, ``optim_steps`` times.
 

@@ -7,15 +7,18 @@ import itertools
 import torch
 from tensordict import TensorDictBase
 
-from hierloco.components.planners.base import BoxPlannerBase
+from hierloco.components.planners.base import PLANNERS, BoxPlannerBase
 
 
+@PLANNERS.register("exhaustive")
 class ExhaustivePlanner(BoxPlannerBase):
     """Scores all ``G ** H`` sequences over a finite action set and returns the first action of the best.
 
     Works on a world model env whose action spec is ``Categorical(G)``, or on a box with an explicit ``choices``
     tensor (``G x A``) of actions to enumerate.
     """
+
+    ACTION_SPACES = ("finite",)
 
     def __init__(self, env, planning_horizon: int = 1, choices: torch.Tensor | None = None, max_sequences=100_000):
         super().__init__(env, planning_horizon, num_candidates=1)

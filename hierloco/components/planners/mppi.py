@@ -5,9 +5,10 @@ from __future__ import annotations
 import torch
 from tensordict import TensorDictBase
 
-from hierloco.components.planners.base import BoxPlannerBase
+from hierloco.components.planners.base import PLANNERS, BoxPlannerBase
 
 
+@PLANNERS.register("mppi")
 class BoxMPPIPlanner(BoxPlannerBase):
     """MPPI: samples around a mean plan, weights them by ``softmax(return / temperature)``, averages; repeats.
 

@@ -5,9 +5,10 @@ from __future__ import annotations
 import torch
 from tensordict import TensorDictBase
 
-from hierloco.components.planners.base import BoxPlannerBase
+from hierloco.components.planners.base import PLANNERS, BoxPlannerBase
 
 
+@PLANNERS.register("random_shooting")
 class RandomShootingPlanner(BoxPlannerBase):
     """Samples ``num_candidates`` action sequences uniformly in the box and returns the first action of the best.
 

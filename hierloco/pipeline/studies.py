@@ -6,12 +6,14 @@ started for the study, or on the cluster at ``address`` / ``RAY_ADDRESS``. Each 
 with as many simulation and torch threads as it has cores, so jobs never oversubscribe the machine. Finished jobs
 are reused from their run directories (a killed study, re-run, resubmits only what did not finish); a failed job
 is reported with its run directory and the others go on; the rows of every job come back to the driver through Ray,
-so a cluster without shared storage works too (``fetch_run_dirs=True`` also brings each run directory back). With a
-``records`` directory (``recipes/common/records.py``) every finished job also leaves its small record there, and a
-job whose run directory is missing is taken from its record while its stage keys are today's: a study runs in parts,
-on several machines or sessions. A job that ends in a finding about its setting (``recipes/common/entry.py``:
-``findings``) is not evaluable, a result rather than a failure: it is kept (``failed.json`` in its run directory and
-record) and reported from there, not run again, while the stage it failed in has today's key.
+so a cluster without shared storage works too (``fetch_run_dirs=True`` also brings each run directory back). A job's
+rows are read from the evaluation artifacts its plan names (never from a loose CSV), so a run directory re-run with
+another config is run again, not misreported. With a ``records`` directory (:mod:`hierloco.pipeline.records`) every
+finished job also leaves its verified record there, and a job whose run directory is missing is taken from its
+record while its stage keys are today's: a study runs in parts, on several machines or sessions. A job that ends in
+a finding about its setting (:class:`hierloco.errors.Finding`) is not evaluable, a result rather than a failure: it
+is kept (``failed.json`` in its run directory, its record) and reported from there, not run again, while the stage it
+failed in has today's key.
 
 Example:
     >>> jobs = [Job("lat", "outputs/lat/tiny/a1_seed0", ["preset=tiny"]), Job("lib", "outputs/lib/tiny/a1_seed0",
@@ -34,11 +36,11 @@ from pathlib import Path
 from typing import Sequence
 
 from hierloco.io import write_text
-from hierloco.results import read_csv
-from recipes.common import records as job_records
+from hierloco.pipeline import records as job_records
+from hierloco.pipeline.errors import ConfigError
+from hierloco.envs.batched_sim import available_cores
+from hierloco.pipeline.methods import METHODS
 
-RECIPES = Path(__file__).resolve().parents[1]
-METHODS = tuple(sorted(p.name for p in RECIPES.iterdir() if (p / "train.py").exists()))
 DONE = "job.json"  # written into a job's run directory when it finished
 PARENT_PID = "HIERLOCO_PARENT_PID"  # set for a job's recipe: the worker it dies with (die_with_parent)
 
@@ -56,7 +58,7 @@ class Job:
     reuse_stages: tuple = ()       # equal to this job's own): those named here, or every one when it names none
 
     def command(self) -> list[str]:
-        return [sys.executable, str(RECIPES / self.method / "train.py"), f"run_dir={self.run_dir}",
+        return [sys.executable, str(METHODS[self.method].train_script), f"run_dir={self.run_dir}",
                 f"nthread={self.cores}", *self.overrides]
 
     def signature(self) -> dict:
@@ -73,91 +75,151 @@ class JobResult:
     error: str = ""
     source: str = ""  # the directory its rows and timings came from: the run directory, or the job's record
     finding: bool = False  # it failed with a finding about its setting (``failed.json``): not evaluable, a result
+    report: dict = field(default_factory=dict)  # the run's report.json (stage wall-clocks)
+    builds: dict = field(default_factory=dict)  # the run's builds.json (what building each stage took)
+    recorded_seconds: float = float("nan")  # a reused job: its wall-clock when it ran
 
     def __post_init__(self):
         self.source = self.source or self.job.run_dir
 
 
 def resolve_method(name: str, variants) -> tuple[str, list[str]]:
-    """A study's method: a recipe name, or a variant ``{recipe: ..., overrides: [...]}`` (e.g. ``ik_plain``: the IK
-    recipe with the paper's plain footstep law); returns the recipe and the variant's overrides."""
+    """A study's method: a method of the registry (:data:`hierloco.pipeline.methods.METHODS`), or a variant
+    ``{recipe: ..., overrides: [...]}`` (e.g. ``ik_plain``: the IK recipe with the paper's plain footstep law);
+    returns the recipe and the variant's overrides."""
     variants = variants or {}
     if name in variants:
         variant = variants[name]
         recipe = variant.get("recipe")
         if recipe not in METHODS:
-            raise ValueError(f"variant {name!r} names no recipe (recipe: one of {', '.join(METHODS)})")
+            raise ValueError(f"variant {name!r} names no recipe (recipe: one of {', '.join(METHODS.names())})")
         return recipe, list(variant.get("overrides", []))
     if name not in METHODS:
-        raise ValueError(f"unknown method {name!r} (recipes: {', '.join(METHODS)}; variants: "
+        raise ValueError(f"unknown method {name!r} (recipes: {', '.join(METHODS.names())}; variants: "
                          f"{', '.join(variants) or 'none'})")
     return name, []
-
-
-def finished(job: Job) -> bool:
-    """Whether ``job`` already finished in its run directory with the same method and overrides, and every stage
-    its recipe plans today is there with the key it has today (a changed default or code path that enters a key
-    makes the job run again, and the run then names the stage that changed)."""
-    return job_records.holds_job(job.run_dir, job.signature()) and stages_current(job)
 
 
 def planned_stages(job: Job) -> list:
     """The stages (``StageSpec``: name, key, file) the job's recipe plans today from its overrides; nothing is
     built or written."""
-    import importlib
-
-    from recipes.common.config import compose_recipe, prepare
+    from hierloco.pipeline.config import compose_recipe, prepare
 
     cfg = compose_recipe(job.method, [f"run_dir={job.run_dir}", *job.overrides])
-    utils = importlib.import_module(f"recipes.{job.method}.utils")
-    return [stage.spec for stage in utils.plan(cfg, prepare(cfg, utils.checks))]
+    utils = METHODS[job.method].utils()
+    planned = utils.plan(cfg, prepare(cfg, utils.checks))
+    return [stage.spec for stage in (planned.stages() if hasattr(planned, "stages") else planned)]
 
 
-def stages_current(job: Job) -> bool:
-    """Whether every stage of the job's plan (its recipe's config from its overrides, planned as the recipe would
-    now) is finished in its run directory with the same key; no work is done and nothing is written."""
-    from hierloco.runs import RunDirectory
+def _plan_or_none(job: Job):
+    try:
+        return planned_stages(job)
+    except Exception:  # noqa: BLE001  (any config problem: run the job, which reports it properly)
+        return None
+
+
+def evaluation_rows(run_dir: str | os.PathLike, specs) -> list[dict]:
+    """The per-episode rows of a finished job: from the evaluation artifacts its plan names (``specs``), each
+    validated as it loads. Raises :class:`hierloco.io.ArtifactError` naming a bad one."""
+    from hierloco.results import TaskEvaluation
+
+    rows = []
+    for spec in specs:
+        if spec.name.startswith("evaluation_"):
+            rows += TaskEvaluation.load(Path(run_dir) / spec.filename).rows
+    return rows
+
+
+def finished(job: Job, specs=None) -> bool:
+    """Whether ``job`` already finished in its run directory with the same method and overrides, and every stage
+    its recipe plans today is there with the key it has today (a changed default or code path that enters a key
+    makes the job run again, and the run then names the stage that changed)."""
+    if not _holds_job(job.run_dir, job.signature()):
+        return False
+    specs = _plan_or_none(job) if specs is None else specs
+    if specs is None:
+        return False
+    from hierloco.pipeline.rundir import RunDirectory
 
     try:
-        return all(RunDirectory(job.run_dir, readonly=True).verify(planned_stages(job)).values())
-    except Exception:  # noqa: BLE001  (any config or key problem: run the job, which reports it properly)
+        return all(RunDirectory(job.run_dir, readonly=True).verify(specs).values())
+    except Exception:  # noqa: BLE001  (a stage made with another config: the job runs and names it)
         return False
 
 
-def recorded(job: Job, records: str) -> bool:
-    """Whether the job's record under ``records`` is of this job (method, overrides) with today's stage keys."""
+def _holds_job(run_dir: str | os.PathLike, signature: dict) -> bool:
+    try:
+        return json.loads((Path(run_dir) / DONE).read_text()).get("signature") == signature
+    except (OSError, ValueError, AttributeError):
+        return False
+
+
+def _json_file(path: Path) -> dict:
+    try:
+        value = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return {}
+    return value if isinstance(value, dict) else {}
+
+
+def run_record(job: Job, specs) -> dict:
+    """The record of the job finished in its run directory (rows from its planned evaluations)."""
+    run_dir = Path(job.run_dir)
+    done = _json_file(run_dir / DONE)
+    return job_records.make_record(job.signature(), specs, rows=evaluation_rows(run_dir, specs),
+                                   report=_json_file(run_dir / "report.json"),
+                                   builds=_json_file(run_dir / "builds.json"), seconds=done.get("seconds"))
+
+
+def finding_record(job: Job, specs, finding: dict) -> dict:
+    run_dir = Path(job.run_dir)
+    return job_records.make_record(job.signature(), specs, finding=finding,
+                                   builds=_json_file(run_dir / "builds.json"))
+
+
+def _seconds(record: dict) -> float:
+    return float(record["seconds"]) if isinstance(record.get("seconds"), (int, float)) else float("nan")
+
+
+def recorded(job: Job, records: str, specs=None) -> dict | None:
+    """The job's verified record under ``records`` when it is of this job (method, overrides) with today's stage
+    keys, else ``None``. An edited or damaged record raises :class:`hierloco.pipeline.records.RecordError`."""
     directory = job_records.record_dir(records, job.run_dir)
-    if not job_records.holds_job(directory, job.signature()):
-        return False
-    try:
-        specs = planned_stages(job)
-    except Exception:  # noqa: BLE001  (a config problem: run the job, which reports it properly)
-        return False
-    return job_records.current(directory, job.signature(), specs)
+    if not (directory / job_records.RECORD).is_file():
+        return None
+    record = job_records.read(directory)
+    specs = _plan_or_none(job) if specs is None else specs
+    if specs is None or record["rows"] is None or not job_records.matches(record, job.signature(), specs):
+        return None
+    return record
 
 
-def found(job: Job, records: str | None = None) -> tuple[str, str] | None:
-    """The finding a job ended in (``failed.json`` in its run directory, else in its record under ``records``) while
-    the stage it failed in has today's key: ``(error, where)``, else ``None``."""
-    places = [Path(job.run_dir)] + ([job_records.record_dir(records, job.run_dir)] if records else [])
-    places = [place for place in places if (place / job_records.FAILED).is_file()]
-    if not places:
+def found(job: Job, records: str | None = None, specs=None) -> tuple[str, str, dict] | None:
+    """The finding a job ended in (``failed.json`` in its run directory, else its record under ``records``) while
+    the stage it failed in has today's key: ``(error, where, finding)``, else ``None``."""
+    specs = _plan_or_none(job) if specs is None else specs
+    if specs is None:
         return None
-    try:
-        specs = planned_stages(job)
-    except Exception:  # noqa: BLE001  (a config problem: run the job, which reports it properly)
-        return None
-    for place in places:
-        error = job_records.finding(place, job.signature(), specs)
+    failure = job_records.run_finding(job.run_dir)
+    if failure is not None and _json_file(Path(job.run_dir) / job_records.FAILED).get("signature") == job.signature():
+        record = job_records.make_record(job.signature(), specs, finding=failure)
+        error = job_records.finding_of(record, job.signature(), specs)
         if error is not None:
-            return error, str(place)
+            return error, job.run_dir, failure
+    if records:
+        directory = job_records.record_dir(records, job.run_dir)
+        if (directory / job_records.RECORD).is_file():
+            record = job_records.read(directory)
+            error = job_records.finding_of(record, job.signature(), specs)
+            if error is not None:
+                return error, str(directory), record["finding"]
     return None
 
 
 def execute(job: Job, fetch_run_dir: bool = False) -> dict:
-    """Runs one job here (in a subprocess); returns its outcome, its result rows and optionally its run directory
-    as a tar archive. This is the body of the Ray task. A job that ends in a finding (the recipe's ``failed.json``)
-    comes back with ``finding`` set and its record."""
+    """Runs one job here (in a subprocess); returns its outcome, its result rows (from the evaluation artifacts its
+    plan names), its record and optionally its run directory as a tar archive. This is the body of the Ray task. A
+    job that ends in a finding (the recipe's ``failed.json``) comes back with ``finding`` set and its record."""
     start = time.perf_counter()
     if job.reuse_from:
         _reuse_stages(job)
@@ -173,20 +235,25 @@ def execute(job: Job, fetch_run_dir: bool = False) -> dict:
                               env={**env, PARENT_PID: str(os.getpid())}).returncode
     outcome = {"ok": code == 0, "seconds": time.perf_counter() - start, "rows": [], "error": "", "archive": None,
                "record": None, "finding": False}
+    specs = _plan_or_none(job)
     if code != 0:
-        failed = Path(job.run_dir) / job_records.FAILED
-        if failed.is_file():  # a finding: the same config fails the same way; kept with the job's signature
-            outcome["record"] = job_records.failure_of(job.run_dir, job.signature())
-            text = outcome["record"][job_records.FAILED]
-            write_text(failed, text)
-            outcome.update(finding=True, error=json.loads(text)["error"] + f" (log: {log})")
+        failure = job_records.run_finding(job.run_dir)
+        if failure is not None and specs is not None:  # a finding: the same config fails the same way
+            write_text(Path(job.run_dir) / job_records.FAILED,
+                       json.dumps({"signature": job.signature(), **failure}, indent=2))
+            outcome.update(finding=True, error=failure["error"] + f" (log: {log})",
+                           record=finding_record(job, specs, failure))
             return outcome
         tail = log.read_text().strip().splitlines()[-3:]
         outcome["error"] = f"exit code {code}: " + " | ".join(tail) + f" (log: {log})"
         return outcome
-    outcome["rows"] = read_csv(Path(job.run_dir) / "episodes.csv")
     write_text(Path(job.run_dir) / DONE, json.dumps({"signature": job.signature(), "seconds": outcome["seconds"]}))
-    outcome["record"] = job_records.files_of(job.run_dir)  # small: back to the driver, which may keep it (records)
+    try:
+        record = run_record(job, specs)
+    except Exception as error:  # noqa: BLE001  (an evaluation artifact that does not load: the job is not usable)
+        outcome.update(ok=False, error=f"its results cannot be read: {error} (log: {log})")
+        return outcome
+    outcome.update(rows=record["rows"], record=record, report=record["report"], builds=record["builds"])
     if fetch_run_dir:
         buffer = io.BytesIO()
         with tarfile.open(fileobj=buffer, mode="w:gz") as archive:
@@ -216,7 +283,7 @@ def reusable_stages(job: Job, specs=None, source_plan=None) -> list:
     holds finished with the key this job plans, of those ``job.reuse_stages`` names (of all when it names none). A
     stage made with another config is never taken, so a job may name a source that shares only its first stages.
     ``source_plan`` (the source's planned stages) stands for the source when it is a job still to run."""
-    from hierloco.runs import ArtifactError, RunDirectory, normalized
+    from hierloco.pipeline.rundir import ArtifactError, RunDirectory, normalized
 
     if not job.reuse_from:
         return []
@@ -240,7 +307,7 @@ def _reuse_stages(job: Job) -> None:
     each key before its artifact and the artifact atomically: a copy cut short leaves a stage to build, never a
     stage without its key."""
     from hierloco.io import atomic_path
-    from hierloco.runs import BUILDS_NAME, RunDirectory
+    from hierloco.pipeline.rundir import BUILDS_NAME, RunDirectory
 
     try:
         specs = reusable_stages(job)
@@ -276,20 +343,36 @@ def _progress(done: int, running: int, failed: int, pending: int, start: float, 
 
 
 def check_records(records) -> None:
-    """Refuses a ``records`` setting that is not a directory path (or null), before any work."""
-    from recipes.common.config import ConfigError
-
-    if records is None:
-        return
-    if not isinstance(records, str) or not records.strip():
-        raise ConfigError(f"records must be a directory path or null, got {records!r}")
-    if Path(records).exists() and not Path(records).is_dir():
-        raise ConfigError(f"records={records} exists and is not a directory")
+    """See :func:`hierloco.pipeline.records.check_records`."""
+    job_records.check_records(records)
 
 
 def _keep_record(records: str | None, job: Job, record: dict | None) -> None:
     if records and record:
         job_records.save(record, job_records.record_dir(records, job.run_dir))
+
+
+def check_ray_address(address: str, timeout: float = 10.0) -> None:
+    """Refuses, in one line and within ``timeout`` seconds, a Ray address that does not answer (``host:port``,
+    ``ray://host:port``); ``auto`` and ``local`` are left to Ray."""
+    import socket
+    from urllib.parse import urlparse
+
+    if address in ("auto", "local"):
+        return
+    parsed = urlparse(address if "://" in address else f"tcp://{address}")
+    try:
+        host, port = parsed.hostname, parsed.port
+    except ValueError:
+        host = port = None
+    if not host or not port:
+        raise ConfigError(f"ray.address={address!r} is not host:port (or ray://host:port)")
+    try:
+        with socket.create_connection((host, port), timeout=timeout):
+            pass
+    except OSError as error:
+        raise ConfigError(f"cannot reach a Ray cluster at {address} ({error.strerror or error}): start it, or leave "
+                          "ray.address and RAY_ADDRESS unset for a local instance") from None
 
 
 def plan_text(jobs: Sequence[Job], done: dict[int, JobResult], slots: int | None,
@@ -300,8 +383,8 @@ def plan_text(jobs: Sequence[Job], done: dict[int, JobResult], slots: int | None
     (this study's, and with ``records``, every recorded job of that method, preset and robot: another seed's run
     of an earlier study estimates this seed's). Then the total, and what it is on ``slots`` jobs at once (``None``:
     a cluster, not said)."""
-    from hierloco.runs import RunDirectory
-    from recipes.common.report import job_compute
+    from hierloco.pipeline.rundir import RunDirectory
+    from hierloco.pipeline.report import job_compute
 
     def group(job: Job) -> tuple[str, str]:
         return job.labels.get("method", job.method), Path(job.run_dir).name.rsplit("_seed", 1)[0]
@@ -315,25 +398,27 @@ def plan_text(jobs: Sequence[Job], done: dict[int, JobResult], slots: int | None
             return set()
 
     known: dict[tuple, list[float]] = {}
-    timed: set[Path] = set()
+    timed: set[str] = set()
 
-    def learn(source: str | Path, key: tuple[str, str]) -> None:
-        if Path(source).resolve() in timed:
+    def learn(source: str, report: dict, builds: dict, key: tuple[str, str]) -> None:
+        if source in timed:
             return
-        timed.add(Path(source).resolve())
-        stages, _ = job_compute(str(source))
-        for name, seconds in stages.items():
+        timed.add(source)
+        for name, seconds in job_compute(report, builds).items():
             if seconds is not None:
                 known.setdefault((*key, name), []).append(seconds / 60)
 
     for result in done.values():
-        learn(result.source, group(result.job))
+        learn(str(Path(result.source).resolve()), result.report, result.builds, group(result.job))
     for index, job in enumerate(jobs):
         if records and index not in done:
             here = job_records.record_dir(records, job.run_dir)
             for sibling in sorted(here.parent.glob(f"{group(job)[1]}_seed*")):
-                if (sibling / "job.json").is_file():
-                    learn(sibling, group(job))
+                try:
+                    record = job_records.read(sibling)
+                except job_records.RecordError:
+                    continue
+                learn(str(sibling.resolve()), record["report"], record["builds"], group(job))
     lines = ["| method | run directory | state | compute (min) |", "|---|---|---|---|"]
     todo_minutes, unknown = 0.0, 0
     to_run = {job.run_dir: job for index, job in enumerate(jobs) if index not in done}
@@ -385,14 +470,16 @@ def run_jobs(jobs: Sequence[Job], *, address: str | None = None, cores_per_job: 
              progress_every: float = 30.0) -> list[JobResult]:
     """Runs ``jobs`` through Ray (see the module docstring) and returns one :class:`JobResult` per job, in order.
     With ``records`` (a directory), every finished job leaves its record there and a job missing from its run
-    directory is taken from its current record (``recipes/common/records.py``). With ``dry_run``, prints the plan
+    directory is taken from its current record (``hierloco/pipeline/records.py``). With ``dry_run``, prints the plan
     (:func:`plan_text`) and ends the study (``SystemExit(0)``) without running or writing anything."""
     import ray
 
     check_records(records)
+    address = address or os.environ.get("RAY_ADDRESS")
+    if address and not dry_run:
+        check_ray_address(address)
     results: dict[int, JobResult] = {}
     todo = []
-    address = address or os.environ.get("RAY_ADDRESS")
     from_records = 0
     for index, job in enumerate(jobs):
         if not address:  # local workers share this file system: give them absolute paths
@@ -400,24 +487,35 @@ def run_jobs(jobs: Sequence[Job], *, address: str | None = None, cores_per_job: 
             job.reuse_from = str(Path(job.reuse_from).resolve()) if job.reuse_from else None
         if cores_per_job is not None:
             job.cores = int(cores_per_job)
-        if finished(job):
-            results[index] = JobResult(job, True, read_csv(Path(job.run_dir) / "episodes.csv"), 0.0, reused=True)
+        specs = _plan_or_none(job)
+        record = None
+        if specs is not None and finished(job, specs):
+            try:
+                record = run_record(job, specs)
+            except Exception as error:  # noqa: BLE001  (an evaluation that does not load: run the job again)
+                print(f"study: {job.run_dir}: {error}; running the job again", flush=True)
+        if record is not None:
+            results[index] = JobResult(job, True, record["rows"], 0.0, reused=True, report=record["report"],
+                                       builds=record["builds"], recorded_seconds=_seconds(record))
             if not dry_run:
-                _keep_record(records, job, job_records.files_of(job.run_dir))
-        elif records and not (Path(job.run_dir) / DONE).exists() and recorded(job, records):
+                _keep_record(records, job, record)
+        elif records and specs is not None and not (Path(job.run_dir) / DONE).exists() and (
+                recorded_job := recorded(job, records, specs)) is not None:
             source = job_records.record_dir(records, job.run_dir)
-            results[index] = JobResult(job, True, job_records.rows(source), 0.0, reused=True, source=str(source))
+            results[index] = JobResult(job, True, recorded_job["rows"], 0.0, reused=True, source=str(source),
+                                       report=recorded_job["report"], builds=recorded_job["builds"],
+                                       recorded_seconds=_seconds(recorded_job))
             from_records += 1
-        elif (finding := found(job, records)) is not None:
-            error, source = finding
+        elif (finding := found(job, records, specs)) is not None:
+            error, source, failure = finding
             results[index] = JobResult(job, False, [], 0.0, reused=True, error=error, source=source, finding=True)
             if source == job.run_dir and not dry_run:
-                _keep_record(records, job, job_records.failure_of(job.run_dir, job.signature()))
+                _keep_record(records, job, finding_record(job, specs, failure))
         else:
             todo.append(index)
     if dry_run:
         cores = max(1, jobs[0].cores) if jobs else 1
-        print(plan_text(jobs, results, slots=None if address else max(1, _available_cores() // cores),
+        print(plan_text(jobs, results, slots=None if address else max(1, available_cores() // cores),
                         records=records), flush=True)
         raise SystemExit(0)
     findings = sum(r.finding for r in results.values())
@@ -432,7 +530,7 @@ def run_jobs(jobs: Sequence[Job], *, address: str | None = None, cores_per_job: 
                          runtime_env={"working_dir": str(RECIPES.parent), "excludes": ["outputs", ".venv", ".git"]})
             else:  # a local instance; its workers run at normal priority (Ray lowers it by default)
                 os.environ.setdefault("RAY_worker_niceness", "0")
-                ray.init(num_cpus=_available_cores(), include_dashboard=False, log_to_driver=False,
+                ray.init(num_cpus=available_cores(), include_dashboard=False, log_to_driver=False,
                          configure_logging=False)
         remote = ray.remote(execute)
         waiting = _waiting(jobs, todo)  # job -> the job of this study it starts from, which must end first
@@ -462,7 +560,8 @@ def run_jobs(jobs: Sequence[Job], *, address: str | None = None, cores_per_job: 
                     with tarfile.open(fileobj=io.BytesIO(outcome["archive"]), mode="r:gz") as archive:
                         archive.extractall(job.run_dir, filter="data")
                 results[index] = JobResult(job, outcome["ok"], outcome["rows"], outcome["seconds"],
-                                           error=outcome["error"], finding=outcome["finding"])
+                                           error=outcome["error"], finding=outcome["finding"],
+                                           report=outcome.get("report") or {}, builds=outcome.get("builds") or {})
                 _keep_record(records, job, outcome.get("record"))
                 durations.append(outcome["seconds"])
                 finished_at = time.perf_counter()
@@ -492,13 +591,6 @@ def _waiting(jobs: Sequence[Job], todo: Sequence[int]) -> dict[int, int]:
             if jobs[i].reuse_from in to_run and to_run[jobs[i].reuse_from] != i}
 
 
-def _available_cores() -> int:
-    try:
-        return len(os.sched_getaffinity(0))
-    except (AttributeError, OSError):
-        return os.cpu_count() or 1
-
-
 def rows_of(results: Sequence[JobResult]) -> list[dict]:
     """The per-episode rows of the successful jobs, each with its job's labels."""
     return [{**row, **result.job.labels} for result in results if result.ok for row in result.rows]
@@ -517,13 +609,15 @@ def report_failures(results: Sequence[JobResult]) -> int:
 def run_here(job: Job) -> list[dict]:
     """Runs one job on this machine without Ray (a study that needs a single run, e.g. navigation's LAT run);
     returns its rows, raising with the job's log when it fails."""
-    if finished(job):
-        return read_csv(Path(job.run_dir) / "episodes.csv")
+    specs = _plan_or_none(job)
+    if specs is not None and finished(job, specs):
+        return evaluation_rows(job.run_dir, specs)
     outcome = execute(job)
     if not outcome["ok"]:
         raise RuntimeError(f"{job.method} run into {job.run_dir} failed: {outcome['error']}")
     return outcome["rows"]
 
 
-__all__ = ["DONE", "METHODS", "Job", "JobResult", "check_records", "execute", "finished", "plan_text", "planned_stages",
-           "recorded", "report_failures", "resolve_method", "rows_of", "run_here", "run_jobs"]
+__all__ = ["DONE", "Job", "JobResult", "check_ray_address", "check_records", "evaluation_rows", "execute", "finished",
+           "plan_text", "planned_stages", "recorded", "report_failures", "resolve_method", "rows_of", "run_here",
+           "run_jobs"]

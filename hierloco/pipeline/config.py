@@ -8,18 +8,14 @@ config: the library takes keyword arguments.
 from __future__ import annotations
 
 import math
-from pathlib import Path
 from typing import Any, Callable, Iterable
 
 from omegaconf import DictConfig, ListConfig, OmegaConf, open_dict
 
 from hierloco.envs.faults import SETTINGS, physical_setting  # normal, the fault models, the hardware robot
-CONTINUOUS_PLANNERS = ("random_shooting", "cem", "mppi")
+from hierloco.pipeline.errors import ConfigError
+
 LIST_OPTIONS = ("settings", "eval.videos", "logger.backends")
-
-
-class ConfigError(ValueError):
-    """A config a recipe cannot run: the message names every problem."""
 
 
 def section(cfg: DictConfig, name: str) -> dict:
@@ -85,19 +81,29 @@ class Checker:
 
 
 # ---------------------------------------------------------------------------------------------------- tasks
+def task_specs(cfg) -> dict:
+    """Task name -> its spec (``task`` type and options): the main tasks (``eval.tasks``), then the generalisation
+    ones (``eval.generalization``)."""
+    specs = {}
+    for group in ("tasks", "generalization"):
+        entries = cfg.eval.get(group)
+        for name, spec in (OmegaConf.to_container(entries, resolve=True) if entries is not None else {}).items():
+            specs[name] = dict(spec or {})
+    return specs
+
+
 def make_task_from_spec(name: str, spec: dict):
-    """The task ``name`` of the ``eval`` section: ``spec`` holds its type (``task``, default the name) and options;
-    ``split: train`` gives its training split instead (:meth:`hierloco.envs.tasks.Task.training_split`: the half of
-    the targets a baseline is trained or tuned on), named ``<name>_train``.
+    """The task ``name`` of the ``eval`` section: ``spec`` holds its type (``task``: a name in the task registry
+    :data:`hierloco.envs.tasks.TASKS`, or ``package.module:Class``; default the name) and options; ``split: train``
+    gives its training split instead (:meth:`hierloco.envs.tasks.Task.training_split`: the half of the targets a
+    baseline is trained or tuned on), named ``<name>_train``.
 
     Unknown options and bad values raise :class:`ConfigError` naming the task, the option and the valid ones."""
-    from hierloco.envs.tasks import TASKS, make_task
+    from hierloco.envs.tasks import make_task
 
     options = dict(spec or {})
     kind = options.pop("task", name)
     split = options.pop("split", "all")
-    if kind not in TASKS:
-        raise ConfigError(f"bad config: unknown task {kind!r} for eval task {name!r} (tasks: {', '.join(TASKS)})")
     if split not in ("all", "train"):
         raise ConfigError(f"bad config: eval task {name!r}: split must be all or train, got {split!r}")
     try:
@@ -112,7 +118,7 @@ QUALITY_BARS = {"min_expert_reach": (False, "(0, 1]"), "min_reproduced_fraction"
 
 
 def check_quality_bars(c: Checker) -> None:
-    """The ``checks.*`` bars (``recipes/common/conf/checks``), if the recipe has them: fractions, ``0`` allowed
+    """The ``checks.*`` bars (``recipes/conf/checks``), if the recipe has them: fractions, ``0`` allowed
     only where it means "report, do not stop"."""
     for key, (zero, interval) in QUALITY_BARS.items():
         value = get(c.cfg, f"checks.{key}", None)
@@ -223,24 +229,31 @@ def check_dynamics(c: Checker) -> None:
     c.fraction("dynamics.holdout")
 
 
-def check_planner(c: Checker, planners: Iterable[str]) -> None:
-    planners = tuple(planners)
-    c.choice("planner.name", planners, "planner")
+def check_planner(c: Checker, action_space: str = "box") -> None:
+    """``planner.name`` from the planner registry (:data:`hierloco.components.planners.PLANNERS`) for this
+    ``action_space`` (``box``: LAT's latents, IK's commands; ``finite``: LIB's experts), ``planner.horizon``, and
+    every other key of the section an option of some registered planner, with a value like its default; the
+    selected planner is built on a stand-in world model, so it checks its own values."""
+    from hierloco.components.planners import PLANNERS, check_planner_options
+
+    name = get(c.cfg, "planner.name")
+    suitable = [n for n in PLANNERS.names() if action_space in PLANNERS[n].ACTION_SPACES]
+    if isinstance(name, str) and ":" in name:
+        try:
+            PLANNERS[name]
+        except ValueError as error:
+            c.fail(str(error))
+            return
+    elif name not in suitable:
+        c.fail(f"unknown planner {name!r} (planner.name: choose from {', '.join(suitable)})")
+        return
     c.integer("planner.horizon")
-    if get(c.cfg, "planner.name") != "exhaustive":
-        c.integer("planner.num_candidates")
-        c.integer("planner.optim_steps")
-        c.integer("planner.top_k")
-        c.positive("planner.temperature")
-        top_k, count = get(c.cfg, "planner.top_k"), get(c.cfg, "planner.num_candidates")
-        if get(c.cfg, "planner.name") == "cem" and _is_int(top_k) and _is_int(count) and top_k > count:
-            c.fail(f"planner.top_k={top_k} exceeds planner.num_candidates={count}")
+    for problem in check_planner_options(name, section(c.cfg, "planner"), action_space=action_space):
+        c.fail(problem)
 
 
 def check_eval(c: Checker) -> dict:
     """Builds every evaluation task (so a misspelt option is caught now); returns name -> task."""
-    from recipes.common.stages import task_specs
-
     tasks = {}
     try:
         specs = task_specs(c.cfg)
@@ -280,7 +293,9 @@ def compose_recipe(method: str, overrides: Iterable[str]) -> DictConfig:
     from hydra import compose, initialize_config_dir
     from hydra.core.global_hydra import GlobalHydra
 
-    directory = Path(__file__).resolve().parents[1] / method
+    from hierloco.pipeline.methods import METHODS
+
+    directory = METHODS[method].folder
     outer = GlobalHydra.instance().hydra if GlobalHydra.instance().is_initialized() else None
     GlobalHydra.instance().clear()
     try:

@@ -10,8 +10,10 @@ any work, so a refused run writes nothing. A killed run resumes at its first unf
 
 One process at a time writes a run directory: :meth:`RunDirectory.acquire` takes an exclusive ``flock`` on
 ``.lock`` (the kernel releases it when the holder dies, so a killed run's lock is taken over) and a second process is
-refused at once with a message naming the holder. A directory the process may not write is opened read-only: every
-stage must then be finished, and nothing is written.
+refused at once with a message naming the holder (or, asked to, waits for it). A directory the process may not write
+is opened read-only: every stage must then be finished, and nothing is written. :func:`check_run_dir` refuses, before
+anything is written, a path that cannot be a run directory: empty, ``/``, the home or working directory, a file, a
+symlink loop, or a directory of other files that hierloco did not make.
 
 Example:
     >>> import json, tempfile
@@ -41,7 +43,7 @@ from typing import Any, Callable, Iterable, TypeVar
 
 import numpy as np
 
-from hierloco.io import ArtifactError, write_text
+from hierloco.io import TEMPORARY_PREFIX, ArtifactError, write_text
 
 T = TypeVar("T")
 LOCK_NAME = ".lock"
@@ -58,6 +60,52 @@ class RunLockedError(RuntimeError):
 
 class ReadOnlyRunError(RuntimeError):
     """A read-only run directory lacks a stage that would have to be built."""
+
+
+class RunDirectoryError(ValueError):
+    """A path that cannot be (or is not this run's) run directory."""
+
+
+MARKERS = ("run.json", LOCK_NAME, BUILDS_NAME)  # a directory holding one of these (or a stage key) is hierloco's
+
+
+def is_run_directory(path: Path) -> bool:
+    """Whether ``path`` is a directory hierloco made: it holds a run manifest, a lock, a build record or a stage
+    key at its top level."""
+    return path.is_dir() and (any((path / name).exists() for name in MARKERS) or any(path.glob("*.key.json")))
+
+
+def check_run_dir(value) -> Path:
+    """``value`` as a run directory path, or :class:`RunDirectoryError` naming why it cannot be one: empty, ``/``,
+    the home directory, the working directory itself (or one of its parents), an existing file, a symlink loop, or
+    a non-empty directory that hierloco did not make. Nothing is written."""
+    text = "" if value is None else str(value)
+    if not text.strip():
+        raise RunDirectoryError("run_dir is empty: give a directory for the run (or leave run_dir unset)")
+    path = Path(text).expanduser()
+    try:
+        resolved = path.resolve(strict=False)
+    except (OSError, RuntimeError) as error:  # a symlink loop
+        raise RunDirectoryError(f"run_dir={text} cannot be resolved ({error})") from None
+    if resolved == Path(resolved.anchor) or resolved == Path.home().resolve():
+        raise RunDirectoryError(f"run_dir={text} is {resolved}: give a directory of its own for the run")
+    if resolved == Path.cwd().resolve() or resolved in Path.cwd().resolve().parents:
+        raise RunDirectoryError(f"run_dir={text} is the working directory or one of its parents: give a directory "
+                                "of its own for the run")
+    if path.is_symlink() and not path.exists():
+        raise RunDirectoryError(f"run_dir={text} is a broken symbolic link")
+    if resolved.exists() and not resolved.is_dir():
+        raise RunDirectoryError(f"run_dir={text} is an existing file, not a directory")
+    if resolved.is_dir():
+        try:
+            entries = [entry.name for entry in resolved.iterdir()]
+        except OSError as error:
+            raise RunDirectoryError(f"run_dir={text} cannot be listed ({error.strerror})") from None
+        if entries and not is_run_directory(resolved):
+            listed = ", ".join(sorted(entries)[:3]) + (", ..." if len(entries) > 3 else "")
+            raise RunDirectoryError(f"run_dir={text} holds files hierloco did not make ({listed}): give an empty or "
+                                    "new directory, or a run directory of a recipe")
+    return path
 
 
 def _json_default(value):
@@ -170,27 +218,38 @@ class RunDirectory:
             raise RunLockedError(f"run directory {self.path} is in use by {who}; wait for it to finish or choose "
                                  "another run_dir")
 
-    def acquire(self, holder: str | None = None) -> None:
-        """Takes the run directory for this process; raises :class:`RunLockedError` naming the holder if another
-        process has it. A lock left by a killed process is taken over. No-op when read-only."""
+    def acquire(self, holder: str | None = None, *, wait: bool = False, poll: float = 2.0) -> None:
+        """Takes the run directory for this process; if another process has it, raises :class:`RunLockedError`
+        naming the holder, or with ``wait`` says so once and waits for it. A lock left by a killed process is taken
+        over, and the temporary files it left (``.hierloco-tmp-*`` at the top level) are removed. No-op when
+        read-only."""
         if self.readonly or self._lock_fd is not None:
             return
         self.path.mkdir(parents=True, exist_ok=True)
         lock = self.path / LOCK_NAME
         fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            os.close(fd)
-            raise RunLockedError(f"run directory {self.path} is in use by {_describe_holder(lock)}; wait for it to "
-                                 "finish or choose another run_dir") from None
+        said = False
+        while True:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                break
+            except BlockingIOError:
+                if not wait:
+                    os.close(fd)
+                    raise RunLockedError(f"run directory {self.path} is in use by {_describe_holder(lock)}; wait for "
+                                         "it to finish or choose another run_dir") from None
+                if not said:
+                    print(f"waiting for run directory {self.path}, in use by {_describe_holder(lock)}", flush=True)
+                    said = True
+                time.sleep(poll)
         info = {"pid": os.getpid(), "host": socket.gethostname(), "started": time.strftime("%Y-%m-%d %H:%M:%S"),
                 "command": holder or " ".join(sys.argv)}
         os.ftruncate(fd, 0)
         os.pwrite(fd, json.dumps(info).encode(), 0)
         self._lock_fd = fd
-        for leftover in self.path.rglob(".*.tmp*"):  # half-written files of a killed run (never under final names)
-            leftover.unlink(missing_ok=True)
+        for leftover in self.path.glob(f"{TEMPORARY_PREFIX}*"):  # half-written files of a killed run
+            if leftover.is_file():
+                leftover.unlink(missing_ok=True)
 
     def release(self) -> None:
         if self._lock_fd is not None:
@@ -217,9 +276,10 @@ class RunDirectory:
         return builds if isinstance(builds, dict) else {}
 
     def _record_build(self, name: str, seconds: float) -> None:
-        threads = os.environ.get("OMP_NUM_THREADS") or (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
-                                                        else os.cpu_count())
-        builds = {**self.builds(), name: {"seconds": round(seconds, 3), "threads": int(threads), "host": socket.gethostname(),
+        threads = os.environ.get("OMP_NUM_THREADS", "")
+        threads = int(threads) if threads.strip().isdigit() else (
+            len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count())
+        builds = {**self.builds(), name: {"seconds": round(seconds, 3), "threads": threads, "host": socket.gethostname(),
                                           "cpu": cpu_description(),
                                           "finished": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}}
         write_text(self.path / BUILDS_NAME, json.dumps(builds, indent=1, sort_keys=True))

@@ -16,8 +16,6 @@ Stages, in order (see ``docs/index.md`` for the paper's steps):
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
-from typing import Any, Callable
 
 import numpy as np
 import torch
@@ -32,25 +30,13 @@ from hierloco.envs.faults import fault_legs, is_unadapted, physical_setting, set
 from hierloco.envs.latent_env import LatentActionEnv
 from hierloco.envs.locomotion import periods_per_action
 from hierloco.envs.robots import CONTROL_TIMESTEP, hardware_options
-from hierloco.io import load_json, save_json
+from hierloco.errors import Finding
 from hierloco.results import TaskEvaluation
-from hierloco.runs import StageSpec, digest
-from hierloco.trained import make_planner, make_world_model
-from recipes.common import report
-from recipes.common.config import make_task_from_spec, section
-
-
-class JsonReport(dict):
-    """A stage artifact that is a JSON object, validated against ``SCHEMA`` when loaded."""
-
-    SCHEMA: dict = {}
-
-    def save(self, path) -> None:
-        save_json(path, dict(self))
-
-    @classmethod
-    def load(cls, path) -> "JsonReport":
-        return cls(load_json(path, cls.SCHEMA))
+from hierloco.pipeline.plan import JsonReport, SettingPlan, Stage
+from hierloco.pipeline.rundir import digest
+from hierloco.trained import make_world_model
+from hierloco.pipeline import report
+from hierloco.pipeline.config import make_task_from_spec, section, task_specs
 
 
 class GaitPolicyCheck(JsonReport):
@@ -58,34 +44,8 @@ class GaitPolicyCheck(JsonReport):
               "interpolation_between": float}
 
 
-class GaitPolicyQualityError(ValueError):
+class GaitPolicyQualityError(Finding, ValueError):
     """The latent gait policy does not reproduce enough of its experts in simulation."""
-
-
-@dataclass(frozen=True)
-class Stage:
-    """One cached stage: ``build(run, params, *inputs)`` makes the artifact (a class with ``save(path)`` and
-    ``load(path)``), stored as ``filename`` beside its key ``{params, after}``."""
-
-    name: str
-    params: dict
-    after: dict
-    filename: str
-    artifact: Any
-    build: Callable
-    check: Callable | None = None  # check(run, artifact): raises when the artifact is unfit (cached or not)
-
-    @property
-    def key(self) -> dict:
-        return {"params": self.params, "after": self.after}
-
-    @property
-    def digest(self) -> str:
-        return digest(self.key)
-
-    @property
-    def spec(self) -> StageSpec:
-        return StageSpec(self.name, self.key, self.filename)
 
 
 # ---------------------------------------------------------------------------------------------------- experts
@@ -215,11 +175,25 @@ def build_dynamics_model(run, params, data: TransitionData, low_level) -> Traine
 def evaluation_stage(cfg, name: str, spec: dict, setting: str, model: Stage, low_level: dict) -> Stage:
     """MPC on one task; cached per task and planner (the file name carries the key's digest)."""
     params = {"seed": cfg.seed, "device": cfg.device, "setting": setting, "task_name": name, "task": spec,
-              "planner": section(cfg, "planner"), **hardware_params(cfg, setting)}
+              "planner": planner_params(cfg), **hardware_params(cfg, setting)}
     after = {"model": model.digest, "low_level": low_level}
     key_digest = digest({"params": params, "after": after})
     return Stage(f"evaluation_{setting}_{name}", params, after, f"evaluation/{setting}/{name}-{key_digest}.npz",
                  TaskEvaluation, build_evaluation)
+
+
+# The planner options every evaluation key has always held; any other option enters the key only when it differs from
+# its default, so adding an option keeps the keys of finished runs and committed records (docs/pipeline.md).
+PLANNER_KEYS = ("name", "horizon", "num_candidates", "optim_steps", "top_k", "temperature")
+
+
+def planner_params(cfg) -> dict:
+    """The ``planner`` section as an evaluation's key holds it (see :data:`PLANNER_KEYS`)."""
+    from hierloco.components.planners import PLANNERS
+    from hierloco.registry import without_defaults
+
+    values = section(cfg, "planner")
+    return without_defaults(values, PLANNERS.options(values["name"]), keep=PLANNER_KEYS)
 
 
 def build_evaluation(run, params, make_low_level, model: TrainedCoMModel) -> TaskEvaluation:
@@ -236,6 +210,8 @@ def evaluation_rollout(robot, params: dict, task, low_level, model: TrainedCoMMo
     """The :class:`~hierloco.components.evaluation.TaskRollout` of an evaluation stage's ``params`` (setting,
     planner, seed, device, hardware): what :func:`build_evaluation` scores, and what ``recipes/adverse/trace.py``
     replays from a finished run's evaluation key."""
+    from hierloco.components.planners import make_planner
+
     world_model = make_world_model(model.model, low_level, device=params["device"])
     planner = make_planner(world_model, seed=params["seed"], **params["planner"])
     locked, limp = fault_legs(robot, params["setting"])
@@ -249,37 +225,30 @@ def evaluation_rollout(robot, params: dict, task, low_level, model: TrainedCoMMo
 
 
 # ---------------------------------------------------------------------------------------------------- helpers
-def per_setting_stages(cfg, low_level: dict, robot) -> list[Stage]:
-    """The model-based part of a plan, for every setting: dynamics data on the low level, the CoM model, one
-    evaluation per task (LAT, LIB and IK share it; only their low level differs)."""
-    planned, models = [], {}
+def per_setting_stages(cfg, low_level: dict, robot) -> list[SettingPlan]:
+    """The model-based part of a plan, for every setting whose CoM dynamics are learned: dynamics data on the low
+    level, the CoM model, and the evaluations that plan with it (LAT, LIB and IK share it; only their low level
+    differs). A ``<setting>_unadapted`` setting plans with the normal setting's model, so ``normal`` is then learned
+    first even when it is not evaluated."""
+    planned: dict[str, SettingPlan] = {}
     learned = [s for s in cfg.settings if not is_unadapted(s)]
     if len(learned) < len(cfg.settings) and "normal" not in learned:
-        learned.insert(0, "normal")  # an unadapted setting plans with the normal setting's model
+        learned.insert(0, "normal")
     for setting in learned:
         data = dynamics_data_stage(cfg, low_level, setting, robot)
-        models[setting] = dynamics_model_stage(cfg, data, setting)
-        planned += [data, models[setting]]
-        if setting in cfg.settings:
-            planned += evaluation_stages(cfg, setting, models[setting], low_level)
+        model = dynamics_model_stage(cfg, data, setting)
+        planned[setting] = SettingPlan(setting, data, model,
+                                       evaluation_stages(cfg, setting, model, low_level) if setting in cfg.settings
+                                       else [])
     for setting in cfg.settings:
         if is_unadapted(setting):
-            planned += evaluation_stages(cfg, setting, models["normal"], low_level)
-    return planned
+            normal = planned["normal"]
+            normal.evaluations += evaluation_stages(cfg, setting, normal.model, low_level)
+    return list(planned.values())
 
 
 def evaluation_stages(cfg, setting: str, model: Stage, low_level: dict) -> list[Stage]:
     return [evaluation_stage(cfg, name, spec, setting, model, low_level) for name, spec in task_specs(cfg).items()]
-
-
-def task_specs(cfg) -> dict:
-    """Task name -> its spec (``task`` type and options): the main tasks, then the generalisation ones."""
-    specs = {}
-    for group in ("tasks", "generalization"):
-        entries = cfg.eval.get(group)
-        for name, spec in (OmegaConf.to_container(entries, resolve=True) if entries is not None else {}).items():
-            specs[name] = dict(spec or {})
-    return specs
 
 
 def set_seed(seed: int) -> None:

@@ -11,7 +11,6 @@ from pathlib import Path
 import numpy as np
 
 from hierloco.envs.robots import CONTROL_TIMESTEP
-from hierloco.plots import plot_gait_diagram, plot_latent_map, plot_task_paths, plot_velocity_tracking
 from hierloco.results import TaskEvaluation, episode_rows
 
 VIDEO_FPS = 20
@@ -49,24 +48,29 @@ def log_evaluation(logger, evaluation: TaskEvaluation, setting: str, name: str) 
 
 def task_figures(evaluation: TaskEvaluation, task, robot, figures: Path, *, method: str, setting: str,
                  steps_per_action: int) -> list[Path]:
-    """The paths figure of a task, plus the velocity plot (velocity tracking) and the gait diagram (goal
-    reaching); returns the files written. Needs the evaluation's recording."""
+    """The figures a task declares (:attr:`hierloco.envs.tasks.Task.figures`: ``paths``, ``velocity``, ``gait``)
+    drawn from an evaluation's recording; returns the files written (none without a recording)."""
+    from hierloco.plots import plot_gait_diagram, plot_task_paths, plot_velocity_tracking
+
     recording = evaluation.recording
     if "com_paths" not in recording:
         return []
     name = task.name
     title = f"{method.upper()} {robot.name} ({setting}): {name}"
-    paths = [figures / f"{setting}_{name}_paths.png"]
-    plot_task_paths(task, recording["com_paths"], paths[0], title=title)
-    if name == "velocity_tracking":
-        paths.append(figures / f"{setting}_{name}_velocity.png")
-        plot_velocity_tracking(task, recording["com_paths"][0], paths[-1], title=title)
-    if name == "goal_reaching":
-        paths.append(figures / f"{setting}_gait_during_{name}.png")
-        plot_gait_diagram(recording["foot_contacts"][0, : GAIT_DIAGRAM_ACTIONS * steps_per_action], robot.leg_names,
-                          paths[-1], action_steps=steps_per_action,
-                          title=f"{method.upper()} {robot.name} ({setting}): gait during {name} (pink stance, blue "
-                                "swing; dashed: new action)")
+    paths = []
+    for figure in task.figures:
+        if figure == "paths":
+            paths.append(figures / f"{setting}_{name}_paths.png")
+            plot_task_paths(task, recording["com_paths"], paths[-1], title=title)
+        elif figure == "velocity":
+            paths.append(figures / f"{setting}_{name}_velocity.png")
+            plot_velocity_tracking(task, recording["com_paths"][0], paths[-1], title=title)
+        elif figure == "gait" and "foot_contacts" in recording:
+            paths.append(figures / f"{setting}_gait_during_{name}.png")
+            plot_gait_diagram(recording["foot_contacts"][0, : GAIT_DIAGRAM_ACTIONS * steps_per_action],
+                              robot.leg_names, paths[-1], action_steps=steps_per_action,
+                              title=f"{method.upper()} {robot.name} ({setting}): gait during {name} (pink stance, "
+                                    "blue swing; dashed: new action)")
     return paths
 
 
@@ -89,6 +93,7 @@ def task_video(evaluation: TaskEvaluation, task, robot, path: Path, *, disabled_
 def latent_map(low_level, robot, path: Path, *, method: str, seed: int) -> Path | None:
     """The 2-D latent map figure (CoM paths over a grid of actions), only for a 2-D continuous action space."""
     from hierloco.components.evaluation import latent_grid_paths
+    from hierloco.plots import plot_latent_map
 
     if low_level.action_dim != 2 or low_level.num_choices is not None:
         return None
@@ -105,48 +110,11 @@ def headline(evaluations: dict) -> float:
     return float(np.mean(costs)) if costs else float("nan")
 
 
-def write_study_tables(rows: list[dict], results, out: Path, *, name: str, settings, title: str,
-                       tasks=("velocity_tracking", "goal_reaching", "trajectory_tracking")) -> str:
-    """A study's outputs in ``out``: ``<name>.csv`` (per-episode rows), ``<name>.md`` (mean +- std over targets and
-    seeds), ``wallclock.md`` (each job's wall-clock) and a bar chart per setting; returns the Markdown table."""
-    from hierloco.io import write_text
-    from hierloco.plots import plot_comparison
-    from hierloco.results import EPISODE_COLUMNS, csv_text, markdown_table
-
-    table = markdown_table(rows)
-    columns = EPISODE_COLUMNS + [k for k in rows[0] if k not in EPISODE_COLUMNS]
-    write_text(out / f"{name}.csv", csv_text(rows, columns))
-    write_text(out / f"{name}.md", f"# {name.capitalize()}\n\n{title}. Normalised cost, mean +- std over targets and "
-                                   "seeds (1 = no better than standing still).\n\n" + table)
-    write_text(out / "wallclock.md", wallclock_markdown(results))
-    for setting in settings:
-        if any(r["setting"] == setting and r["task"] in tasks for r in rows):
-            plot_comparison(rows, out / f"{name}_{setting}.png", setting=setting, tasks=tasks, title=title)
-    return table
-
-
-def _recorded_seconds(run_dir: str) -> float:
-    import json
-
-    try:
-        return float(json.loads((Path(run_dir) / "job.json").read_text())["seconds"])
-    except (OSError, ValueError, KeyError):
-        return float("nan")
-
-
-def job_compute(run_dir: str) -> tuple[dict[str, float | None], dict]:
-    """The stages a finished run needs (its last ``report.json``) -> the seconds building each took (``None`` when
-    not recorded, as for stages built before ``builds.json`` existed), and ``builds.json`` itself."""
-    import json
-
-    from hierloco.runs import RunDirectory
-
-    builds = RunDirectory(run_dir, readonly=True).builds()
-    try:
-        stages = json.loads((Path(run_dir) / "report.json").read_text())["stage_seconds"]
-    except (OSError, ValueError, KeyError):
-        return {}, builds
-    return {name: builds.get(name, {}).get("seconds") for name in stages}, builds
+def job_compute(report: dict, builds: dict) -> dict[str, float | None]:
+    """The stages a finished run needs (its ``report.json``'s ``stage_seconds``) -> the seconds building each took
+    (its ``builds.json``; ``None`` when not recorded, as for stages built before ``builds.json`` existed)."""
+    stages = (report or {}).get("stage_seconds") or {}
+    return {name: (builds or {}).get(name, {}).get("seconds") for name in stages}
 
 
 def _reuse_word(result, source: str) -> str:
@@ -176,12 +144,12 @@ def wallclock_markdown(results) -> str:
     per_method: dict[tuple[str, str], list[float]] = {}
     for result in results:
         source = result.source  # the run directory, or the job's record
-        seconds = result.seconds if not result.reused else _recorded_seconds(source)
+        seconds = result.recorded_seconds if result.reused else result.seconds
         method = result.job.labels.get("method", result.job.method)
-        stages, builds = job_compute(source)
+        stages = job_compute(result.report, result.builds)
         known = [v for v in stages.values() if v is not None]
         missing = sum(v is None for v in stages.values())
-        threads = sorted({b.get("threads") for n, b in builds.items() if n in stages and b.get("threads")})
+        threads = sorted({b.get("threads") for n, b in result.builds.items() if n in stages and b.get("threads")})
         compute = sum(known) if stages else float("nan")
         robot = _robot_name(result.job)
         if stages and not missing:

@@ -1,0 +1,143 @@
+"""The entry point of every recipe: Hydra over the recipe's ``config.yaml``, the run opened, clean errors.
+
+A recipe's ``train.py`` is its method body over an open run::
+
+    from hierloco.pipeline import recipe_main
+    from recipes.lat import utils
+
+    @recipe_main(utils)              # config.yaml beside utils.py; utils.plan / checks / manifest / METHOD
+    def main(run):
+        library = run.stage(run.plan.experts)
+        ...
+        return run.finish()
+
+:func:`recipe_main` composes the config, opens the run (:func:`hierloco.pipeline.run.open_run`: the whole config
+checked, every stage planned and its key checked, the run directory locked) and runs the body; the run directory
+is released when the body returns or raises, so the jobs of a Hydra multirun on one ``run_dir`` run one after
+another. A user's mistake prints ``error: <one line>`` and exits 2 before any work; Ctrl-C or SIGTERM says which
+stage was interrupted and that re-running resumes (exit 130); anything else is a bug and keeps its traceback.
+"""
+
+from __future__ import annotations
+
+import errno
+import functools
+import os
+import signal
+import sys
+from pathlib import Path
+from types import ModuleType
+from typing import Callable
+
+from hierloco.pipeline.errors import EXIT_INTERRUPTED, EXIT_USER_ERROR, ConfigError, one_line, user_errors
+
+DISK_ERRORS = (errno.ENOSPC, errno.EDQUOT)
+
+
+def disk_full(error: BaseException) -> bool:
+    """Whether ``error`` is the file system running out of space (or quota)."""
+    return isinstance(error, OSError) and error.errno in DISK_ERRORS
+
+
+def report_error(error: BaseException) -> None:
+    """Prints ``error`` as the one line a user reads (a full disk says that finished stages are kept)."""
+    if disk_full(error):
+        where = f" writing {error.filename}" if getattr(error, "filename", None) else ""
+        print(f"error: no space left on the device{where}; finished stages are kept: free some space and run the "
+              "same command again to resume", file=sys.stderr)
+    else:
+        print(f"error: {one_line(error)}", file=sys.stderr)
+
+
+def check_environment() -> None:
+    """Refuses, before any work, environment variables that would break a run later (thread counts, the
+    rendering backend)."""
+    from hierloco import render_backend
+    from hierloco.pipeline.outputs import environment_threads
+
+    problems = environment_threads()
+    if render_backend.problem():
+        problems.append(render_backend.problem())
+    if problems:
+        raise ConfigError("; ".join(problems))
+
+
+def sigterm_as_interrupt() -> None:
+    """SIGTERM (a study stopping its jobs, a cluster's scheduler) stops the run like Ctrl-C: finished stages are
+    kept and the run directory is released."""
+    def interrupt(signum, frame):
+        raise KeyboardInterrupt
+
+    try:
+        signal.signal(signal.SIGTERM, interrupt)
+    except ValueError:  # not the main thread (a Hydra launcher's worker thread): left as it is
+        pass
+
+
+def recipe_main(utils: ModuleType, config_name: str = "config") -> Callable:
+    """Decorates a recipe's ``main(run)`` (see the module docstring); returns the console entry point. ``utils`` is
+    the recipe's factories module: ``METHOD``, ``plan(cfg, robot)``, ``checks(checker, robot)``, ``manifest(cfg,
+    robot)``; ``config.yaml`` sits beside it. ``entry.run(cfg, evaluation_out=None)`` runs the body on a composed
+    config (evaluation: ``recipes/evaluate.py``)."""
+    import hydra
+
+    from hierloco.pipeline.run import open_run
+
+    folder = str(Path(utils.__file__).resolve().parent)
+    active: dict = {}  # the run this entry point has open, for the interruption message
+
+    def decorate(body: Callable) -> Callable:
+        def run(cfg, evaluation_out: Path | None = None):
+            check_environment()
+            opened = open_run(cfg, utils.METHOD, utils.plan, utils.checks, getattr(utils, "manifest", None),
+                              evaluation_out=evaluation_out)
+            active["run"] = opened
+            try:
+                with opened:
+                    return body(opened)
+            finally:
+                active.pop("run", None)
+
+        @hydra.main(config_path=folder, config_name=config_name, version_base=None)
+        @functools.wraps(body)
+        def task(cfg):
+            try:
+                return run(cfg)
+            except user_errors() as error:  # reported here: Hydra would add a line of its own
+                report_error(error)
+                sys.exit(EXIT_USER_ERROR)
+            except OSError as error:
+                if not disk_full(error):
+                    raise
+                report_error(error)
+                sys.exit(EXIT_USER_ERROR)
+
+        @functools.wraps(body)
+        def entry():
+            os.environ.setdefault("HYDRA_FULL_ERROR", "1")  # Hydra raises its own errors; this wrapper reports them
+            from hydra.errors import HydraException
+
+            from hierloco.pipeline.studies import die_with_parent
+
+            die_with_parent()  # a job of a study ends with the study's worker
+            sigterm_as_interrupt()
+            try:
+                return task()
+            except KeyboardInterrupt:
+                where = active["run"].where() if "run" in active else ""
+                print(f"interrupted{where}; finished stages are kept: run the same command again to resume",
+                      file=sys.stderr)
+                sys.exit(EXIT_INTERRUPTED)
+            except HydraException as error:  # a bad override, an unknown config group option
+                report_error(error)
+                sys.exit(EXIT_USER_ERROR)
+
+        entry.run = run
+        entry.body = body
+        entry.utils = utils
+        return entry
+
+    return decorate
+
+
+__all__ = ["check_environment", "disk_full", "recipe_main", "report_error"]

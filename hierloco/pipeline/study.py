@@ -1,0 +1,146 @@
+"""The skeleton every study shares (compare, ablations, adverse, hardware, tune): an entry point, jobs on Ray,
+the tables, and the end.
+
+A study's ``run.py`` reads::
+
+    @study_main(__file__)
+    def main(cfg):
+        planned = jobs(cfg)                                   # the recipe runs, as studies.Job
+        results = run_study(cfg, planned)                     # Ray; records; dry_run prints the plan and stops
+        rows = rows_of(results)
+        write_tables(rows, results, Path(cfg.out_dir), name="comparison", title=..., settings=cfg.settings)
+        ...                                                   # the study's own figures and checks
+        end_study(results)                                    # failures listed; exit 1 if a job failed
+
+Every table a study writes lists the jobs it could not include (failed, or not evaluable with the finding), so a
+robot or seed missing from a table is always said (``docs/pipeline.md``).
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import sys
+from pathlib import Path
+from typing import Callable, Sequence
+
+from hierloco.pipeline.errors import EXIT_INTERRUPTED, EXIT_USER_ERROR, ConfigError, user_errors
+from hierloco.pipeline.studies import Job, JobResult, report_failures, rows_of, run_jobs
+
+PAPER_TASKS = ("velocity_tracking", "goal_reaching", "trajectory_tracking")
+
+
+def study_main(script_file: str, config_name: str = "config") -> Callable:
+    """Decorates a study's ``main(cfg)``: Hydra over the ``config.yaml`` beside ``script_file``, one-line errors
+    (exit 2), Ctrl-C and SIGTERM stop the study and its jobs' recipes (finished stages kept, exit 130)."""
+    import hydra
+
+    folder = str(Path(script_file).resolve().parent)
+
+    def decorate(main: Callable) -> Callable:
+        from hierloco.pipeline.entry import check_environment, disk_full, report_error, sigterm_as_interrupt
+
+        @hydra.main(config_path=folder, config_name=config_name, version_base=None)
+        @functools.wraps(main)
+        def task(cfg):
+            try:
+                check_environment()
+                return main(cfg)
+            except user_errors() as error:
+                report_error(error)
+                sys.exit(EXIT_USER_ERROR)
+            except OSError as error:
+                if not disk_full(error):
+                    raise
+                report_error(error)
+                sys.exit(EXIT_USER_ERROR)
+
+        @functools.wraps(main)
+        def entry():
+            os.environ.setdefault("HYDRA_FULL_ERROR", "1")
+            from hydra.errors import HydraException
+
+            sigterm_as_interrupt()
+            try:
+                return task()
+            except KeyboardInterrupt:
+                print("interrupted: the study's jobs were stopped; their finished stages are kept: run the same "
+                      "command again to resume", file=sys.stderr)
+                sys.exit(EXIT_INTERRUPTED)
+            except HydraException as error:
+                report_error(error)
+                sys.exit(EXIT_USER_ERROR)
+
+        entry.body = main
+        return entry
+
+    return decorate
+
+
+def run_study(cfg, jobs: Sequence[Job]) -> list[JobResult]:
+    """Runs ``jobs`` with the study config's Ray options (``ray.address``, ``ray.cores_per_job``,
+    ``ray.fetch_run_dirs``), ``records`` and ``dry_run``."""
+    ray = cfg.get("ray") or {}
+    return run_jobs(jobs, address=ray.get("address"), cores_per_job=ray.get("cores_per_job"),
+                    fetch_run_dirs=bool(ray.get("fetch_run_dirs", False)), records=cfg.get("records"),
+                    dry_run=bool(cfg.get("dry_run", False)))
+
+
+def main_tasks(cfg) -> tuple[str, ...]:
+    """The tasks a study tabulates: ``tasks`` when the study's config names them, else the main tasks
+    (``eval.tasks``) of the LAT recipe at the study's preset."""
+    if cfg.get("tasks"):
+        return tuple(cfg.tasks)
+    from hierloco.pipeline.config import compose_recipe
+
+    return tuple(compose_recipe("lat", [f"preset={cfg.get('preset_name', 'paper')}"]).eval.tasks)
+
+
+def missing_markdown(results: Sequence[JobResult]) -> str:
+    """The jobs a study's tables leave out, and why (failed, or not evaluable: the finding); empty when none."""
+    missing = [r for r in results if not r.ok]
+    if not missing:
+        return ""
+    lines = ["", "## Jobs not in this table", "", "| method | run directory | why |", "|---|---|---|"]
+    for result in missing:
+        why = ("not evaluable: " if result.finding else "failed: ") + " ".join(result.error.split())
+        lines.append(f"| {result.job.labels.get('method', result.job.method)} | {result.job.run_dir} | "
+                     f"{why.replace('|', '/')} |")
+    return "\n".join(lines) + "\n"
+
+
+def write_tables(rows: list[dict], results: Sequence[JobResult], out: Path, *, name: str, title: str, settings=(),
+                 tasks: Sequence[str] = PAPER_TASKS) -> str:
+    """A study's outputs in ``out``: ``<name>.csv`` (per-episode rows), ``<name>.md`` (mean +- std over targets and
+    seeds, then the jobs left out), ``wallclock.md`` and a bar chart per setting; returns the Markdown table."""
+    from hierloco.io import write_text
+    from hierloco.pipeline.report import wallclock_markdown
+    from hierloco.results import EPISODE_COLUMNS, csv_text, markdown_table
+
+    write_text(out / "wallclock.md", wallclock_markdown(results))
+    missing = missing_markdown(results)
+    if not rows:
+        write_text(out / f"{name}.md", f"# {name.capitalize()}\n\n{title}. No job finished.\n" + missing)
+        return ""
+    table = markdown_table(rows)
+    columns = EPISODE_COLUMNS + [k for k in rows[0] if k not in EPISODE_COLUMNS]
+    write_text(out / f"{name}.csv", csv_text(rows, columns))
+    write_text(out / f"{name}.md", f"# {name.capitalize()}\n\n{title}. Normalised cost, mean +- std over targets and "
+                                   "seeds (1 = no better than standing still).\n\n" + table + missing)
+    if settings:
+        from hierloco.plots import plot_comparison
+
+        for setting in settings:
+            if any(r["setting"] == setting and r["task"] in tasks for r in rows):
+                plot_comparison(rows, out / f"{name}_{setting}.png", setting=setting, tasks=tasks, title=title)
+    return table
+
+
+def end_study(results: Sequence[JobResult]) -> None:
+    """Lists the failed and not evaluable jobs; exits 1 when a job failed (a finding is a result, not a failure)."""
+    if report_failures(results):
+        sys.exit(1)
+
+
+__all__ = ["PAPER_TASKS", "ConfigError", "EXIT_INTERRUPTED", "end_study", "main_tasks", "missing_markdown",
+           "rows_of", "run_study", "study_main", "write_tables"]
