@@ -340,5 +340,5 @@ def rows_of(runs: Iterable[Run], *, method=None) -> list[dict]:
     return rows
 
 
-__all__ = ["BOOKKEEPING", "FACTORS", "Run", "VARIANTS", "adopt_configs", "distinct", "job_compute", "method_of", "read_findings",
-           "read_records", "read_table", "replicates", "rows_of", "same_run", "seed_values", "select"]
+__all__ = ["BOOKKEEPING", "FACTORS", "Run", "VARIANTS", "adopt_configs", "distinct", "job_compute", "method_of",
+           "read_findings", "read_records", "read_table", "replicates", "rows_of", "same_run", "seed_values", "select"]

@@ -1,9 +1,9 @@
-"""The paper's ablation claims (Li et al., Sec. IV-E, Fig. 6b-d) decided by tests over the trials.
+"""The paper's ablation claims (Li et al., Sec. IV-E, Fig. 10b-d) decided by tests over the trials.
 
 The paper varies one setting at a time on Daisy, 10 trials per value, and states: the latent dimension (2, 3, 4)
-has "no significant effect" (Fig. 6b); with more experts (10, 30, 50) "the performance on each task improves,
-though the difference from 30 to 50 is minor" (Fig. 6c); 2000 dynamics samples are "a significant improvement" over
-1000, and 5000 no "significant difference" from 2000 (Fig. 6d). Each statement is decided per task on the trials'
+has "no significant effect" (Fig. 10b); with more experts (10, 30, 50) "the performance on each task improves,
+though the difference from 30 to 50 is minor" (Fig. 10c); 2000 dynamics samples are "a significant improvement" over
+1000, and 5000 no "significant difference" from 2000 (Fig. 10d). Each statement is decided per task on the trials'
 mean normalised costs (each trial's mean over its targets first) with the tests of :mod:`hierloco.stats`
 (``docs/statistics.md``): "better" (``values[0]`` costs more than ``values[1]``) is a one-sided Welch t with the
 minimum effect; "no significant difference" is read as *equivalence*: every pair of values within the margin
@@ -48,19 +48,19 @@ class Claim:
 CLAIMS = (
     Claim("latent_dim_no_effect", "latent_dim", (2, 3, 4), "no_difference",
           "latent dimension 2, 3, 4: no significant effect", "\"no significant effect on the performance\"",
-          "Fig. 6b, Sec. IV-E"),
+          "Fig. 10b, Sec. IV-E"),
     Claim("experts_10_30_better", "num_experts", (10, 30), "better",
           "30 experts better than 10", "\"as the number of experts increases the performance on each task improves\"",
-          "Fig. 6c, Sec. IV-E"),
+          "Fig. 10c, Sec. IV-E"),
     Claim("experts_30_50_minor", "num_experts", (30, 50), "no_difference",
           "30 and 50 experts: no significant difference", "\"the difference from 30 to 50 is minor\"",
-          "Fig. 6c, Sec. IV-E"),
+          "Fig. 10c, Sec. IV-E"),
     Claim("samples_1000_2000_better", "dynamics_samples", (1000, 2000), "better",
           "2000 dynamics samples better than 1000", "\"a significant improvement ... 2000 data points versus 1000\"",
-          "Fig. 6d, Sec. IV-E"),
+          "Fig. 10d, Sec. IV-E"),
     Claim("samples_2000_5000_minor", "dynamics_samples", (2000, 5000), "no_difference",
           "2000 and 5000 dynamics samples: no significant difference",
-          "\"no significant difference in performance between 2000 and 5000\"", "Fig. 6d, Sec. IV-E"),
+          "\"no significant difference in performance between 2000 and 5000\"", "Fig. 10d, Sec. IV-E"),
 )
 KEYS = tuple(claim.key for claim in CLAIMS)
 CRITERIA = (f"Tests over the trials (`docs/statistics.md`), alpha = {stats.ALPHA}: \"better\" holds when the cost is "
@@ -109,12 +109,13 @@ def _decide(claim: Claim, trials: dict, robot: str, task: str, ours: str) -> Che
                      f"no trials of {', '.join(map(str, missing))}", claim.figure)
     if claim.kind == "better":
         worse, better = (trials[v] for v in claim.values)
-        parts = [paper_check._part(f"{claim.values[1]} vs {claim.values[0]}", better, worse, "better")]
+        parts = [paper_check.part(f"{claim.values[1]} vs {claim.values[0]}", better, worse, "better",
+                                  names=(f"{claim.name}={claim.values[1]}", f"{claim.name}={claim.values[0]}"))]
     else:
         pairs = list(combinations(trials, 2))
-        parts = [paper_check._part(f"{a} vs {b}", trials[a], trials[b], "close", parts=len(pairs))
-                 for a, b in pairs]
-    check = paper_check._decided(claim.key, claim.text, robot, "normal", task, ours, claim.paper, parts, claim.figure)
+        parts = [paper_check.part(f"{a} vs {b}", trials[a], trials[b], "close", parts=len(pairs),
+                                  names=(f"{claim.name}={a}", f"{claim.name}={b}")) for a, b in pairs]
+    check = paper_check.decided(claim.key, claim.text, robot, "normal", task, ours, claim.paper, parts, claim.figure)
     if claim.kind == "no_difference" and check.verdict == stats.DOES_NOT_HOLD:
         differ = ", ".join(p.label for p in parts if p.decision.verdict == stats.DOES_NOT_HOLD)
         return Check(check.key, check.claim, robot, "normal", task, ours, claim.paper, check.verdict,
@@ -130,4 +131,4 @@ def load_causes(path) -> list[paper_check.Cause]:
 def paper_check_markdown(checks: list[Check], *, title: str, causes=()) -> str:
     """The checks as ``paper_check.md``: the paper's words beside our numbers (value: mean +- std over trials)."""
     return paper_check.paper_check_markdown(checks, title=title, causes=causes, criteria=CRITERIA,
-                                            paper_column="the paper (Sec. IV-E, Fig. 6b-d, Daisy)")
+                                            paper_column="the paper (Sec. IV-E, Fig. 10b-d, Daisy)")

@@ -35,7 +35,7 @@ IK_METHODS = ("ik", "ik_plain")       # IK with our footstep law, and with the p
 TASKS = ("velocity_tracking", "goal_reaching", "trajectory_tracking")
 NOT_MEASURED = "not measured"
 # the paper's stated numbers, all A1 in simulation: (robot, setting, task, method) -> "mean +- std"; where each is
-# stated: Sec. IV-B with Fig. 4b (A1's baseline comparison), Sec. IV-C with Fig. 4d (A1, LAT and IK)
+# stated: Sec. IV-B with Fig. 7b (A1's baseline comparison), Sec. IV-C with Fig. 7d (A1, LAT and IK)
 PAPER = {("a1", "normal", "goal_reaching", "lat"): "0.34 +- 0.02",
          ("a1", "normal", "goal_reaching", "sac"): "0.57 +- 0.06",
          ("a1", "normal", "goal_reaching", "sac_sac"): "0.92 +- 0.04",
@@ -43,15 +43,16 @@ PAPER = {("a1", "normal", "goal_reaching", "lat"): "0.34 +- 0.02",
          ("a1", "normal", "velocity_tracking", "lib"): "0.58 +- 0.01",
          ("a1", "legs_disabled", "velocity_tracking", "lat"): "0.62 +- 0.06",
          ("a1", "legs_disabled", "velocity_tracking", "ik"): "0.91 +- 0.06"}
-# the paper's figure of each claim, per robot: Fig. 4a/4b the learned baselines (Daisy/A1), 4c/4d LAT and IK
-FIGURES = {"learned_best": {"daisy": "Fig. 4a, Sec. IV-B", "a1": "Fig. 4b, Sec. IV-B"},
-           "lib_worse": {"daisy": "Fig. 4a, Sec. IV-B", "a1": "Fig. 4b, Sec. IV-B"},
-           "lib_goals_close": {"daisy": "Fig. 4a, Sec. IV-B", "a1": "Fig. 4b, Sec. IV-B"},
-           "sac_sac_worse": {"daisy": "Fig. 4a, Sec. IV-B", "a1": "Fig. 4b, Sec. IV-B"},
+# the paper's figure of each claim, per robot (figures numbered in the order of the paper's source): Fig. 7a/7b the
+# learned baselines (Daisy/A1), Fig. 7c/7d LAT and IK (Daisy/A1)
+FIGURES = {"learned_best": {"daisy": "Fig. 7a, Sec. IV-B", "a1": "Fig. 7b, Sec. IV-B"},
+           "lib_worse": {"daisy": "Fig. 7a, Sec. IV-B", "a1": "Fig. 7b, Sec. IV-B"},
+           "lib_goals_close": {"daisy": "Fig. 7a, Sec. IV-B", "a1": "Fig. 7b, Sec. IV-B"},
+           "sac_sac_worse": {"daisy": "Fig. 7a, Sec. IV-B", "a1": "Fig. 7b, Sec. IV-B"},
            "heldout_worse": {"daisy": "Sec. IV-B", "a1": "Sec. IV-B"},
-           "close": {"daisy": "Fig. 4c, Sec. IV-C", "a1": "Fig. 4d, Sec. IV-C"},
-           "damaged": {"daisy": "Fig. 4c, Sec. IV-C", "a1": "Fig. 4d, Sec. IV-C"},
-           "ik_deteriorates": {"daisy": "Fig. 4c, Sec. IV-C", "a1": "Fig. 4d, Sec. IV-C"}}
+           "close": {"daisy": "Fig. 7c, Sec. IV-C", "a1": "Fig. 7d, Sec. IV-C"},
+           "damaged": {"daisy": "Fig. 7c, Sec. IV-C", "a1": "Fig. 7d, Sec. IV-C"},
+           "ik_deteriorates": {"daisy": "Fig. 7c, Sec. IV-C", "a1": "Fig. 7d, Sec. IV-C"}}
 
 # the claims by key (what a file of causes names): a word for the claim, ":<method>" for the baseline it is about
 CLAIMS = ("learned_best", "close:ik", "close:ik_plain", "damaged:ik", "damaged:ik_plain", "lib_worse",
@@ -71,6 +72,7 @@ class Part:
     kind: str
     paired: bool
     decision: stats.Decision
+    names: tuple[str, str] = ("", "")   # what a and b are: (method, setting) labels for readers of the check
 
 
 @dataclass(frozen=True)
@@ -112,14 +114,21 @@ def _text(method: str, means: np.ndarray) -> str:
     return f"{method} {means.mean():.2f} +- {means.std():.2f}"
 
 
-def _part(label: str, a, b, kind: str, *, paired: bool = False, parts: int = 1) -> Part:
+def part(label: str, a, b, kind: str, *, paired: bool = False, parts: int = 1, names=("", "")) -> Part:
+    """One comparison tested: per-seed costs ``a`` (``S_a``) against ``b`` (``S_b``, or a constant), ``kind``
+    ``"better"`` or ``"close"``, refuted at ``alpha / parts`` when it is one of ``parts`` comparisons of a claim.
+
+        >>> part("lat vs lib", [0.12, 0.11, 0.13], [0.45, 0.49, 0.44], "better").decision.verdict
+        'holds'
+    """
     decide = stats.decide_better if kind == "better" else stats.decide_close
     a = tuple(float(x) for x in a)
     b = float(b) if np.ndim(b) == 0 else tuple(float(x) for x in b)
-    return Part(label, a, b, kind, paired, decide(a, b, paired=paired, refute_alpha=stats.ALPHA / parts))
+    return Part(label, a, b, kind, paired, decide(a, b, paired=paired, refute_alpha=stats.ALPHA / parts),
+                tuple(names))
 
 
-def _decided(key, claim, robot, setting, task, ours, paper, parts: list[Part], figure="") -> Check:
+def decided(key, claim, robot, setting, task, ours, paper, parts: list[Part], figure="") -> Check:
     """A check from its tested parts: one part's verdict, or several combined as :func:`hierloco.stats.decide_all`
     does (each part must hold; any part refuted at alpha / parts refutes)."""
     verdicts = [p.decision.verdict for p in parts]
@@ -160,55 +169,63 @@ def check_claims(rows, tuned_ik: dict | None = None) -> list[Check]:
             others = {m: s for m in LEARNED if (s := means(m, "normal", task)).size}
             if lat.size and others:
                 ours = ", ".join([_text("lat", lat)] + [_text(m, s) for m, s in others.items()])
-                checks.append(_decided("learned_best", "LAT is best among the learned methods", robot, "normal",
+                checks.append(decided("learned_best", "LAT is best among the learned methods", robot, "normal",
                                        task, ours, paper("normal", task, ("lat", *LEARNED)),
-                                       [_part(f"vs {m}", lat, s, "better", parts=len(others))
-                                        for m, s in others.items()], figure("learned_best")))
+                                       [part(f"vs {m}", lat, s, "better", parts=len(others),
+                                              names=("lat:normal", f"{m}:normal")) for m, s in others.items()],
+                                       figure("learned_best")))
             sac, sac_sac = means("sac", "normal", task), means("sac_sac", "normal", task)
             if sac.size and sac_sac.size:
-                checks.append(_decided("sac_sac_worse", "SAC-SAC's user-defined action space does worse than SAC's "
+                checks.append(decided("sac_sac_worse", "SAC-SAC's user-defined action space does worse than SAC's "
                                        "learned one", robot, "normal", task,
                                        f"{_text('sac', sac)}, {_text('sac_sac', sac_sac)}",
                                        paper("normal", task, ("sac", "sac_sac")),
-                                       [_part("sac vs sac_sac", sac, sac_sac, "better")], figure("sac_sac_worse")))
+                                       [part("sac vs sac_sac", sac, sac_sac, "better",
+                                              names=("sac:normal", "sac_sac:normal"))], figure("sac_sac_worse")))
             for ik in IK_METHODS:
                 tuned = " (the IK tuned on the training targets)" if tuned_ik.get(robot) == ik else ""
                 base = means(ik, "normal", task)
                 if lat.size and base.size:
-                    checks.append(_decided(f"close:{ik}", f"LAT is close to {ik.upper()}{tuned} (within "
+                    checks.append(decided(f"close:{ik}", f"LAT is close to {ik.upper()}{tuned} (within "
                                            f"{stats.EQUIV_MARGIN_REL:.0%})", robot, "normal", task,
                                            f"{_text('lat', lat)}, {_text(ik, base)}", "-",
-                                           [_part(f"lat vs {ik}", lat, base, "close")], figure("close")))
+                                           [part(f"lat vs {ik}", lat, base, "close",
+                                                  names=("lat:normal", f"{ik}:normal"))], figure("close")))
                 damaged, damaged_ik = means("lat", "legs_disabled", task), means(ik, "legs_disabled", task)
                 if damaged.size and damaged_ik.size:
-                    checks.append(_decided(f"damaged:{ik}", f"LAT beats {ik.upper()}{tuned} with legs disabled",
+                    checks.append(decided(f"damaged:{ik}", f"LAT beats {ik.upper()}{tuned} with legs disabled",
                                            robot, "legs_disabled", task,
                                            f"{_text('lat', damaged)}, {_text(ik, damaged_ik)}",
                                            paper("legs_disabled", task, ("lat", ik)),
-                                           [_part(f"lat vs {ik}", damaged, damaged_ik, "better")], figure("damaged")))
+                                           [part(f"lat vs {ik}", damaged, damaged_ik, "better",
+                                                  names=("lat:legs_disabled", f"{ik}:legs_disabled"))],
+                                           figure("damaged")))
                 if base.size and damaged_ik.size:
-                    checks.append(_decided(f"ik_deteriorates:{ik}", f"{ik.upper()}{tuned} deteriorates with legs "
+                    checks.append(decided(f"ik_deteriorates:{ik}", f"{ik.upper()}{tuned} deteriorates with legs "
                                            "disabled", robot, "legs_disabled", task,
                                            f"normal {_text(ik, base)}, legs disabled {_text(ik, damaged_ik)}",
                                            paper("legs_disabled", task, (ik,)),
-                                           [_part(f"{ik} normal vs legs disabled", base, damaged_ik, "better")],
+                                           [part(f"{ik} normal vs legs disabled", base, damaged_ik, "better",
+                                                  names=(f"{ik}:normal", f"{ik}:legs_disabled"))],
                                            figure("ik_deteriorates")))
         lat, lib = means("lat", "normal", "velocity_tracking"), means("lib", "normal", "velocity_tracking")
         claim = "LIB is worse than LAT at velocity tracking"
         known = paper("normal", "velocity_tracking", ("lat", "lib"))
         if lat.size and lib.size:
-            checks.append(_decided("lib_worse", claim, robot, "normal", "velocity_tracking",
+            checks.append(decided("lib_worse", claim, robot, "normal", "velocity_tracking",
                                    f"{_text('lat', lat)}, {_text('lib', lib)}", known,
-                                   [_part("lat vs lib", lat, lib, "better")], figure("lib_worse")))
+                                   [part("lat vs lib", lat, lib, "better", names=("lat:normal", "lib:normal"))],
+                                   figure("lib_worse")))
         else:
             checks.append(Check("lib_worse", claim, robot, "normal", "velocity_tracking", "-", known, NOT_MEASURED,
                                 "LAT and LIB are not both in the rows", figure("lib_worse")))
         lat, lib = means("lat", "normal", "goal_reaching"), means("lib", "normal", "goal_reaching")
         if lat.size and lib.size:
-            checks.append(_decided("lib_goals_close", "LIB generalises well to goal reaching (close to LAT, "
+            checks.append(decided("lib_goals_close", "LIB generalises well to goal reaching (close to LAT, "
                                    f"within {stats.EQUIV_MARGIN_REL:.0%})", robot, "normal", "goal_reaching",
                                    f"{_text('lib', lib)}, {_text('lat', lat)}", "-",
-                                   [_part("lib vs lat", lib, lat, "close")], figure("lib_goals_close")))
+                                   [part("lib vs lat", lib, lat, "close", names=("lib:normal", "lat:normal"))],
+                                   figure("lib_goals_close")))
         checks += _generalisation(rows, robot)
     return checks
 
@@ -227,11 +244,12 @@ def _generalisation(rows, robot: str) -> list[Check]:
         split = {name: seed_means(rows, method=method, robot=robot, setting="normal", task="goal_reaching",
                                   episodes=chosen)
                  for name, chosen in (("training goals", training), ("held-out goals", episodes - training))}
-        checks.append(_decided(f"heldout_worse:{method}", f"{method.upper()} does worse on its held-out goals than "
+        checks.append(decided(f"heldout_worse:{method}", f"{method.upper()} does worse on its held-out goals than "
                                "on its training goals", robot, "normal", "goal_reaching",
                                ", ".join(_text(name, means) for name, means in split.items()), "-",
-                               [_part("training vs held-out goals", split["training goals"], split["held-out goals"],
-                                      "better", paired=True)], FIGURES["heldout_worse"].get(robot, "")))
+                               [part("training vs held-out goals", split["training goals"], split["held-out goals"],
+                                      "better", paired=True, names=(f"{method}:training", f"{method}:held-out"))],
+                               FIGURES["heldout_worse"].get(robot, "")))
     return checks
 
 
@@ -319,7 +337,7 @@ def counts_line(checks) -> str:
 
 
 def paper_check_markdown(checks: list[Check], *, title: str, causes: list[Cause] = (), criteria: str = CRITERIA,
-                         paper_column: str = "paper (A1's numbers: Fig. 4b, Sec. IV-B; legs disabled Fig. 4d, "
+                         paper_column: str = "paper (A1's numbers: Fig. 7b, Sec. IV-B; legs disabled Fig. 7d, "
                                              "Sec. IV-C)") -> str:
     """The checks as a Markdown page (``paper_check.md``), each claim not found to hold (does not hold,
     inconclusive, not testable here) with its numbered cause from ``causes`` (the first that covers it) or "not
