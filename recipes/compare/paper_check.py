@@ -338,10 +338,11 @@ def counts_line(checks) -> str:
 
 def paper_check_markdown(checks: list[Check], *, title: str, causes: list[Cause] = (), criteria: str = CRITERIA,
                          paper_column: str = "paper (A1's numbers: Fig. 7b, Sec. IV-B; legs disabled Fig. 7d, "
-                                             "Sec. IV-C)") -> str:
+                                             "Sec. IV-C)", with_causes: bool = True) -> str:
     """The checks as a Markdown page (``paper_check.md``), each claim not found to hold (does not hold,
     inconclusive, not testable here) with its numbered cause from ``causes`` (the first that covers it) or "not
-    checked". ``criteria`` says what the verdicts mean; ``paper_column`` heads the column of what the paper says."""
+    checked". ``criteria`` says what the verdicts mean; ``paper_column`` heads the column of what the paper says;
+    ``with_causes=False`` leaves the causes out (a study that keeps none)."""
     numbers: dict[Cause, int] = {}
 
     def cause_of(check: Check) -> str:
@@ -354,14 +355,16 @@ def paper_check_markdown(checks: list[Check], *, title: str, causes: list[Cause]
 
     lines = [f"# The paper's claims, checked\n\n{title}. Normalised cost, mean +- std over seeds (each seed's mean "
              f"over its targets); a fallen robot's cost counts as 1. {criteria}\n",
-             f"| claim | robot | setting | task | ours | {paper_column} | verdict | test | cause |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             f"| claim | robot | setting | task | ours | {paper_column} | verdict | test |"
+             + (" cause |" if with_causes else ""),
+             "|---|---|---|---|---|---|---|---|" + ("---|" if with_causes else "")]
     lines += [f"| {c.claim} | {c.robot} | {c.setting} | {c.task} | {c.ours} | {c.paper} | {c.verdict} | "
-              f"{c.detail or '-'} | {cause_of(c)} |" for c in checks]
+              f"{c.detail or '-'} |" + (f" {cause_of(c)} |" if with_causes else "") for c in checks]
     open_ = [c for c in checks if c.verdict in UNDECIDED]
     unexplained = sum(cause_of(c) == "not checked" for c in open_)
-    lines.append(f"\n{counts_line(checks)} ({len(open_) - unexplained} of the {len(open_)} not found to hold with "
-                 f"the cause we checked, {unexplained} not checked).")
+    lines.append(f"\n{counts_line(checks)}" + (f" ({len(open_) - unexplained} of the {len(open_)} not found to hold "
+                                                f"with the cause we checked, {unexplained} not checked)."
+                                                if with_causes else "."))
     if numbers:
         lines.append("\n## The causes we checked\n")
         lines += [f"<a id=\"cause-{n}\"></a>{n}. {cause.text}\n" for cause, n in numbers.items()]
