@@ -36,10 +36,11 @@ import yaml
 
 from hierloco import stats
 from hierloco.evidence import (Run, adopt_configs, distinct, read_findings, read_records, read_table, replicates,
-                               rows_of)
+                               rows_of, seed_values, select)
+from hierloco.io import write_text
 from recipes.ablations import paper_check as ablation_check
 from recipes.compare import paper_check as compare_check
-from recipes.compare.paper_check import NOT_MEASURED, TASKS, Check, Part, counts_line
+from recipes.compare.paper_check import NOT_MEASURED, TASKS, Check, counts_line
 
 COMMAND = "python -m recipes.verdicts"
 ROOT = Path(__file__).resolve().parents[2]
@@ -57,6 +58,7 @@ class Study:
     records: tuple[str, ...] = ()
     table: str = ""
     command: str = ""
+    robot: str = ""     # only this robot's runs (a records folder may hold other robots')
 
 
 STUDIES = (
@@ -66,9 +68,9 @@ STUDIES = (
     Study("adverse", ("adverse/jobs", "records/adverse"),
           command="python recipes/adverse/run.py records=results/adverse/jobs out_dir=results/adverse"),
     Study("hardware_a1", ("hardware/jobs", "records/hardware", "records/hardware_a1"),
-          command="python recipes/hardware/run.py 'robots=[a1]' records=results/hardware/jobs"),
+          command="python recipes/hardware/run.py 'robots=[a1]' records=results/hardware/jobs", robot="a1"),
     Study("hardware_daisy", ("records/hardware_daisy",), table="hardware_daisy/hardware.csv",
-          command="python recipes/hardware/run.py 'robots=[daisy]' 'methods=[lat,ik]' 'seeds=[0,1,2]'"),
+          command="python recipes/hardware/run.py 'robots=[daisy]' 'methods=[lat,ik]' 'seeds=[0,1,2]'", robot="daisy"),
     Study("ablations", ("ablations/jobs", "records/ablations"),
           command="python recipes/ablations/run.py records=results/ablations/jobs out_dir=results/ablations"),
     Study("ablations/no_turn", ("ablations/no_turn/jobs", "records/ablations_no_turn", "records/ablations/no_turn"),
@@ -131,11 +133,13 @@ def load(results: Path) -> Evidence:
     for study in STUDIES:
         found = next((p for p in (locate(results, r) for r in study.records) if p is not None), None)
         if found is not None:
-            evidence.runs[study.name] = read_records(found, folder=study.name)
+            evidence.runs[study.name] = [r for r in read_records(found, folder=study.name)
+                                         if not study.robot or r.robot == study.robot]
             evidence.findings[study.name] = read_findings(found)
             evidence.sources[study.name] = _shown(found, results)
         elif study.table and (table := locate(results, study.table)) is not None:
-            evidence.runs[study.name] = read_table(table, folder=study.name)
+            evidence.runs[study.name] = [r for r in read_table(table, folder=study.name)
+                                         if not study.robot or r.robot == study.robot]
             evidence.findings[study.name] = []
             evidence.sources[study.name] = _shown(table, results) + " (a table: no records)"
             if (clock := locate(results, f"{study.name}/wallclock.md")) is not None:
@@ -197,8 +201,7 @@ SAMPLES = (200, 500, 1000, 2000)
 
 
 def _means(runs, **labels) -> np.ndarray:
-    from hierloco.evidence import seed_values, select
-
+    """The pooled per-seed mean costs of the runs with these labels (``S``)."""
     return seed_values(select(runs, **labels))[1]
 
 
@@ -307,8 +310,7 @@ def hardware_checks(runs: list[Run]) -> list[Check]:
 
 
 def _goals(runs, method, setting) -> str:
-    from hierloco.evidence import select
-
+    """How many goals the runs reached, and in how many steps."""
     chosen = distinct(select(runs, method=method, setting=setting, task="goal_reaching"))
     success = [s for r in chosen for s in r.success if not math.isnan(s)]
     steps = [s for r in chosen for s in r.steps_to_goal if not math.isnan(s)]
@@ -861,8 +863,6 @@ def pages(evidence: Evidence) -> dict[str, str]:
 
 def write_all(evidence: Evidence, out: Path) -> list[Path]:
     """Writes :func:`pages` under ``out``; returns the paths written."""
-    from hierloco.io import write_text
-
     written = []
     for relative, text in pages(evidence).items():
         path = Path(out) / relative
