@@ -197,3 +197,22 @@ def test_power_grows_with_seeds_and_seeds_needed_decides():
     assert decide_close(close_a, close_b).verdict == INCONCLUSIVE
     needed = seeds_needed(close_a, close_b, kind="close")
     assert needed is not None and needed > 3 and power(close_a, close_b, needed, kind="close") >= 0.8
+
+
+def test_the_example_of_docs_statistics_runs_as_printed(capsys):
+    import re
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[1] / "docs" / "statistics.md").read_text()
+    code = re.search(r"```python\n(.*?)```", text, re.S).group(1)
+    exec(compile(code, "docs/statistics.md", "exec"), {})
+    printed = capsys.readouterr().out.splitlines()
+    expected = []
+    for line in code.splitlines():  # what each print says: the comment on its line, or on the line after it
+        if line.startswith("# ") and expected and expected[-1] is None:
+            expected[-1] = line[2:]
+        elif line.startswith("print("):
+            expected.append(line.split("#", 1)[1].strip() if "#" in line else None)
+    assert len(printed) == len(expected)
+    for got, want in zip(printed, expected):
+        assert want is None or got == want or want.startswith(got + ":"), (got, want)
