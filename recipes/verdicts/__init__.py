@@ -333,7 +333,8 @@ def study_checks(evidence: Evidence) -> dict[str, list[Check]]:
             out[name] = hardware_checks(runs[name])
     for name in ("ablations", "ablations/no_turn"):
         if name in runs:
-            out[name] = ablation_checks(runs[name])
+            out[name] = [c for c in ablation_checks(runs[name])
+                         if name == "ablations" or c.verdict != NOT_MEASURED]  # no_turn varies the latent only
     return out
 
 
@@ -832,18 +833,27 @@ def replicate_section(evidence: Evidence, shown: float = 0.02) -> list[str]:
     its folder and CPU; those differing by at least ``shown`` are listed."""
     runs = [r for found in evidence.runs.values() for r in found] + evidence.archived
     groups = replicates(runs)
+    places = defaultdict(lambda: (set(), set()))   # one run found in several places: every folder and CPU named
+    for r in runs:
+        folders, cpus = places[(r.method, r.robot, r.profile, r.setting, r.task, r.seed, r.episodes)]
+        folders.add(r.folder)
+        cpus.update([r.cpu] if r.cpu else [])
+
+    def where(run: Run) -> str:
+        folders, cpus = places[(run.method, run.robot, run.profile, run.setting, run.task, run.seed, run.episodes)]
+        return f"{', '.join(sorted(folders))}; {', '.join(sorted(cpus)) or 'CPU not recorded'}"
+
     spread = lambda g: max(r.cost for r in g) - min(r.cost for r in g)  # noqa: E731
     listed = sorted((g for g in groups if spread(g) >= shown), key=lambda g: -spread(g))
     lines = [f"## Configurations run more than once\n",
              f"{len(groups)} configuration-and-seed groups were run more than once with different numbers "
              f"({sum(spread(g) < 0.001 for g in groups)} of them within 0.001 of each other); the "
              f"{len(listed)} that differ by {shown} or more in mean normalised cost:\n",
-             "| method | robot | profile | setting | task | seed | runs: mean cost (folder, CPU) | spread |",
+             "| method | robot | profile | setting | task | seed | runs: mean cost (folders; CPU) | spread |",
              "|---|---|---|---|---|---|---|---|"]
     for group in listed:
         r = group[0]
-        each = "; ".join(f"{g.cost:.3f} ({g.folder}, {g.cpu or 'CPU not recorded'})"
-                         for g in sorted(group, key=lambda g: g.folder))
+        each = "; ".join(f"{g.cost:.3f} ({where(g)})" for g in sorted(group, key=lambda g: g.folder))
         lines.append(f"| {r.method} | {r.robot} | {r.profile} | {r.setting} | {r.task} | {r.seed} | {each} | "
                      f"{spread(group):.3f} |")
     return lines

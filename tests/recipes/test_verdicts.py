@@ -51,7 +51,7 @@ def test_pages_decide_pool_and_name_what_is_not_measured(tmp_path):
     assert "latent dimension 2, 3, 4" in paper and "**not measured yet**" in paper  # no ablations here
     assert "gait transitions" in paper and "Fig. 9" in paper
     fragile = written["fragile_claims.md"]
-    assert "| ik | a1 | own | normal | velocity_tracking | 1 | 0.310 (adverse, Intel); 0.180 (compare_full, CPU not " \
+    assert "| ik | a1 | own | normal | velocity_tracking | 1 | 0.310 (adverse; Intel); 0.180 (compare_full; CPU not " \
            "recorded) | 0.130 |" in fragile
 
 
