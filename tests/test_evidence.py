@@ -109,3 +109,11 @@ def test_findings_are_read(tmp_path):
     assert (found["method"], found["robot"], found["seed"], found["settings"]) == ("lat", "a1", 2, "[rear_limp]")
     assert found["error"] == "a1: 500 of 500 random actions ended in a fall"
     assert read_records(tmp_path) == []
+
+
+def test_the_docstring_examples_run():
+    import doctest
+
+    import hierloco.evidence
+
+    assert doctest.testmod(hierloco.evidence).failed == 0

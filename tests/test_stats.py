@@ -216,3 +216,11 @@ def test_the_example_of_docs_statistics_runs_as_printed(capsys):
     assert len(printed) == len(expected)
     for got, want in zip(printed, expected):
         assert want is None or got == want or want.startswith(got + ":"), (got, want)
+
+
+def test_the_docstring_examples_run():
+    import doctest
+
+    import hierloco.stats
+
+    assert doctest.testmod(hierloco.stats).failed == 0

@@ -183,3 +183,13 @@ def test_a_malformed_causes_file_is_refused_with_the_problem_named(tmp_path, tex
         load_causes(write(tmp_path, text))
     with pytest.raises(ValueError, match="no file"):
         load_causes(tmp_path / "missing.yaml")
+
+
+def test_the_docstring_examples_run():
+    import doctest
+
+    import recipes.ablations.paper_check
+    import recipes.compare.paper_check
+
+    for module in (recipes.compare.paper_check, recipes.ablations.paper_check):
+        assert doctest.testmod(module).failed == 0
