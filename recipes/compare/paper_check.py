@@ -329,8 +329,11 @@ UNDECIDED = (stats.DOES_NOT_HOLD, stats.INCONCLUSIVE, stats.NOT_TESTABLE)
 
 
 def counts_line(checks) -> str:
-    """How many checks got each verdict, e.g. ``"3 hold, 1 does not hold, 0 inconclusive, ..."``."""
+    """How many checks got each verdict, e.g. ``"3 hold, 1 do not hold, 0 inconclusive, 0 not testable here"``
+    (and how many were not measured, where any were)."""
     tally = {v: sum(c.verdict == v for c in checks) for v in (*stats.VERDICTS, NOT_MEASURED)}
+    if not tally[NOT_MEASURED]:
+        del tally[NOT_MEASURED]
     names = {stats.HOLDS: "hold", stats.DOES_NOT_HOLD: "do not hold", stats.INCONCLUSIVE: "inconclusive",
              stats.NOT_TESTABLE: "not testable here", NOT_MEASURED: "not measured"}
     return ", ".join(f"{n} {names[v]}" for v, n in tally.items())

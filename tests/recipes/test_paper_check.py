@@ -91,7 +91,7 @@ def test_markdown_counts_and_quotes_the_paper():
     data = rows({"lat": seeds(0.20, 0.21, 0.20), "lib": seeds(0.10, 0.11, 0.10)})
     text = paper_check_markdown(check_claims(data), title="test")
     assert "lib 0.58 +- 0.01" in text and "| does not hold | d = " in text and text.rstrip().endswith(
-        "0 hold, 2 do not hold, 0 inconclusive, 0 not testable here, 0 not measured (0 of the 2 not found to hold "
+        "0 hold, 2 do not hold, 0 inconclusive, 0 not testable here (0 of the 2 not found to hold "
         "with the cause we checked, 2 not checked).")
     only_lib = paper_check_markdown(check_claims(rows({"lib": seeds(0.5, 0.6, 0.5)})), title="test")
     assert "| LIB is worse than LAT at velocity tracking | a1 | normal | velocity_tracking | - | " \
