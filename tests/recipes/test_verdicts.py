@@ -1,0 +1,65 @@
+"""recipes.verdicts on a small results tree of job records: each study's verdicts, the paper's claims, the fragile
+ones, regenerated (not hand-written) and checked for staleness."""
+
+from recipes.verdicts import load, main, pages
+from tests.test_evidence import write_record
+
+TASKS = ("velocity_tracking", "goal_reaching", "trajectory_tracking")
+# per method and setting: the mean cost of each task; seed s adds 0.01 * s
+COSTS = {("lat", "normal"): (0.12, 0.09, 0.011), ("lib", "normal"): (0.46, 0.15, 0.04),
+         ("ik", "normal"): (0.17, 0.09, 0.013), ("ik_plain", "normal"): (0.38, 0.38, 0.29),
+         ("lat", "legs_disabled"): (0.93, 0.86, 0.95), ("ik", "legs_disabled"): (1.01, 0.73, 0.77),
+         ("ik_plain", "legs_disabled"): (0.93, 0.86, 0.92)}
+
+
+def results_tree(root):
+    jobs = root / "compare_full" / "jobs"
+    for method in ("lat", "lib", "ik", "ik_plain"):
+        for seed in range(3):
+            costs = {(setting, task): [base[i] + 0.01 * seed] for (m, setting), base in COSTS.items() if m == method
+                     for i, task in enumerate(TASKS)}
+            write_record(jobs, f"{method}/paper/a1_seed{seed}", method=method, robot="a1", seed=seed, costs=costs,
+                         recipe_method="ik" if method == "ik_plain" else method,
+                         overrides=["controller.footstep_law=plain"] if method == "ik_plain" else [],
+                         factors={"num_experts": 50, "latent_dim": 3, "num_transitions": 10000}
+                         if method == "lat" else {"num_transitions": 10000}, seconds=600.0)
+    # the same IK job (same stage keys) run again on another machine by the damage study: another number
+    first = next((jobs / "ik" / "paper" / "a1_seed1" / "evaluation" / "normal").glob("velocity_tracking-*"))
+    key = first.name.split("-")[1].split(".")[0]
+    write_record(root / "adverse" / "jobs", "ik/paper/a1_seed1", method="ik", robot="a1", seed=1,
+                 costs={("normal", "velocity_tracking"): [0.31]}, keys={("normal", "velocity_tracking"): key},
+                 factors={"num_transitions": 10000}, cpu="Intel", seconds=300.0)
+    return root
+
+
+def test_pages_decide_pool_and_name_what_is_not_measured(tmp_path):
+    results = results_tree(tmp_path / "results")
+    evidence = load(results)
+    written = pages(evidence)
+    assert set(written) == {"compare_full/verdicts.md", "adverse/verdicts.md", "paper_check.md",
+                            "fragile_claims.md"}
+    study = written["compare_full/verdicts.md"]
+    assert "`python -m recipes.verdicts`" in study and "| LIB is worse than LAT at velocity tracking | a1 |" in study
+    paper = written["paper_check.md"]
+    damaged = next(line for line in paper.splitlines() if line.startswith("| a1 | legs_disabled | velocity_tracking |")
+                   and "LAT beats IK (the IK tuned" in line)
+    assert "**not testable here**" in damaged  # LAT 0.94 against IK 1.02: both no better than standing still
+    # the IK seed run twice is pooled: one value per seed (seed 1: 0.18 and 0.31 averaged), folders named
+    close = next(line for line in paper.splitlines() if line.startswith("| a1 | normal | velocity_tracking |")
+                 and "close to IK (the IK" in line)
+    assert "ik:normal 0.202 (n=3; adverse, compare_full)" in close  # (0.17 + 0.245 + 0.19) / 3
+    assert "latent dimension 2, 3, 4" in paper and "**not measured yet**" in paper  # no ablations here
+    assert "gait transitions" in paper and "Fig. 9" in paper
+    fragile = written["fragile_claims.md"]
+    assert "| ik | a1 | own | normal | velocity_tracking | 1 | 0.310 (adverse; Intel); 0.180 (compare_full; CPU not " \
+           "recorded) | 0.130 |" in fragile
+
+
+def test_the_files_are_regenerated_and_checked(tmp_path, capsys):
+    results = results_tree(tmp_path / "results")
+    assert main(["--results", str(results), "--check"]) == 1
+    assert "not up to date" in capsys.readouterr().out
+    assert main(["--results", str(results)]) == 0
+    assert (results / "paper_check.md").is_file() and (results / "compare_full" / "verdicts.md").is_file()
+    assert main(["--results", str(results), "--check"]) == 0
+    assert main(["--results", str(tmp_path / "missing")]) == 2
