@@ -112,7 +112,13 @@ class ExpertLibrary:
         missing = set(cls.__dataclass_fields__) - set(arrays) - {"metadata", "tracking_error"}
         if missing:
             raise ArtifactError(f"corrupted expert library {path}: missing {sorted(missing)}")
-        return cls(**arrays, metadata=metadata)
+        unexpected = set(arrays) - set(cls.__dataclass_fields__)
+        if unexpected:
+            raise ArtifactError(f"corrupted expert library {path}: unexpected arrays {sorted(unexpected)}")
+        try:
+            return cls(**arrays, metadata=metadata)
+        except (TypeError, ValueError) as error:  # arrays that do not fit together
+            raise ArtifactError(f"corrupted expert library {path}: {error}") from None
 
 
 def action_motion(com_states: np.ndarray, duration: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

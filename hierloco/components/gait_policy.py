@@ -31,7 +31,7 @@ from torch import nn
 from torchrl.modules import MLP
 from tqdm.auto import tqdm
 
-from hierloco.io import load_checkpoint, save_checkpoint
+from hierloco.io import ArtifactError, load_checkpoint, save_checkpoint
 
 CHECKPOINT_FORMAT = 1
 CHECKPOINT_KIND = "gait_policy"
@@ -115,10 +115,15 @@ class TrainedGaitPolicy:
     @classmethod
     def load(cls, path: str | os.PathLike, map_location="cpu") -> "TrainedGaitPolicy":
         payload = load_checkpoint(path, CHECKPOINT_KIND, CHECKPOINT_FORMAT, map_location)
-        policy = LatentGaitPolicy(**payload["config"])
-        policy.load_state_dict(payload["state_dict"])
+        try:
+            policy = LatentGaitPolicy(**payload["config"])
+            policy.load_state_dict(payload["state_dict"])
+            trained = cls(policy, payload["latents"], payload["latent_low"], payload["latent_high"],
+                          payload["metadata"])
+        except (KeyError, TypeError, ValueError, RuntimeError) as error:  # weights of another shape, ...
+            raise ArtifactError(f"corrupted gait policy checkpoint {path}: {' '.join(str(error).split())}") from None
         policy.eval()
-        return cls(policy, payload["latents"], payload["latent_low"], payload["latent_high"], payload["metadata"])
+        return trained
 
 
 def train_gait_policy(

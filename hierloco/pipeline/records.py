@@ -32,7 +32,7 @@ from typing import Iterable
 
 from hierloco.io import ArtifactError, write_text
 from hierloco.pipeline.errors import ConfigError
-from hierloco.pipeline.rundir import StageSpec, is_run_directory, normalized
+from hierloco.pipeline.rundir import StageSpec, normalized
 
 FAILED = "failed.json"  # a run's finding (hierloco.errors.Finding): the stage, its key and the error
 RECORD = "record.json"
@@ -70,11 +70,11 @@ def check_records(records) -> None:
     if path.exists() and not path.is_dir():
         raise ConfigError(f"records={records} exists and is not a directory")
     for parent in [path.resolve(), *path.resolve().parents]:
-        if is_run_directory(parent):
+        if (parent / "run.json").is_file():
             raise ConfigError(f"records={records} is (or is inside) the run directory {parent}: records live apart "
                               "from run directories (e.g. records=results/<study>/records)")
     if path.is_dir():
-        for marker in ("run.json", ".lock"):
+        for marker in ("run.json", "builds.json"):
             found = next(path.rglob(marker), None)
             if found is not None:
                 raise ConfigError(f"records={records} holds a run directory ({found.parent}): records live apart "

@@ -19,12 +19,14 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
 from hierloco.io import temporaries_in, write_text
+from hierloco.pipeline.budget import check_budget
 from hierloco.pipeline.config import ConfigError, make_task_from_spec, section, task_specs
 from hierloco.pipeline.errors import findings, one_line
 from hierloco.pipeline.outputs import Outputs
 from hierloco.pipeline.plan import Plan, Stage
 from hierloco.pipeline.records import FAILED
 from hierloco.pipeline.rundir import RunDirectory, RunDirectoryError, check_run_dir, normalized
+from hierloco.pipeline.validate import validate
 from hierloco.results import TaskEvaluation, markdown_table, write_results
 from hierloco.trained import MANIFEST
 
@@ -177,6 +179,7 @@ class Run:
                     write_text(self.path / FAILED, json.dumps({"stage": stage.name, "key": normalized(stage.key),
                                                                "error": one_line(error)}, indent=2))
             raise
+        validate(stage, artifact, self.robot, self.path / stage.filename)  # shapes, finite values: or one line
         if timings:
             self.reports.setdefault("timings", {})[stage.name] = timings
         if stage.check is not None:
@@ -300,6 +303,9 @@ def open_run(cfg: DictConfig, method: str, plan: Callable, checks: Callable | No
     if evaluation_out is not None and unfinished:
         raise ConfigError(f"{directory.path} has unfinished training stages ({', '.join(unfinished)}): run "
                           f"recipes/{method}/train.py into it first")
+    threads = int(cfg.nthread) if cfg.get("nthread") is not None else default_threads()
+    check_budget([stage for stage in planned.stages() if not done[stage.name]], threads=threads,
+                 confirmed=bool(cfg.get("confirm_long", False)))
     directory.acquire(wait=multirun)
     try:
         check_owner(directory, method, cfg, robot)

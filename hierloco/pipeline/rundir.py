@@ -66,12 +66,12 @@ class RunDirectoryError(ValueError):
     """A path that cannot be (or is not this run's) run directory."""
 
 
-MARKERS = ("run.json", LOCK_NAME, BUILDS_NAME)  # a directory holding one of these (or a stage key) is hierloco's
+MARKERS = ("run.json", BUILDS_NAME)  # a directory holding one of these (or a stage key) is hierloco's
 
 
 def is_run_directory(path: Path) -> bool:
-    """Whether ``path`` is a directory hierloco made: it holds a run manifest, a lock, a build record or a stage
-    key at its top level."""
+    """Whether ``path`` is a directory hierloco made: it holds a run manifest, a build record or a stage key at its
+    top level."""
     return path.is_dir() and (any((path / name).exists() for name in MARKERS) or any(path.glob("*.key.json")))
 
 

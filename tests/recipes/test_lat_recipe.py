@@ -123,7 +123,7 @@ def test_evaluate_adds_a_task_without_touching_training(tiny_run, tmp_path):
     before = artifact_bytes(copy)
     builds = json.loads((copy / "builds.json").read_text())
     results = (copy / "results.csv").read_bytes()
-    result = subprocess.run([sys.executable, str(ROOT / "recipes" / "lat" / "evaluate.py"), f"run_dir={copy}",
+    result = subprocess.run([sys.executable, str(ROOT / "recipes" / "evaluate.py"), f"run_dir={copy}",
                              "name=far", "progress=false", "eval.videos=[]",
                              "+eval.tasks.goal_reaching_5m={task: goal_reaching, radius: 5.0, num_goals: 2, "
                              "num_steps: 3}"], cwd=ROOT, capture_output=True, text=True, timeout=600)
@@ -137,7 +137,7 @@ def test_evaluate_adds_a_task_without_touching_training(tiny_run, tmp_path):
     new = [p for p in (copy / "evaluation" / "normal").iterdir() if p.name.startswith("goal_reaching_5m-")]
     assert len(new) == 2  # the cached evaluation and its key
     # a training change is refused: evaluate.py never trains
-    refused = subprocess.run([sys.executable, str(ROOT / "recipes" / "lat" / "evaluate.py"), f"run_dir={copy}",
+    refused = subprocess.run([sys.executable, str(ROOT / "recipes" / "evaluate.py"), f"run_dir={copy}",
                               "policy.epochs=3"], cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert refused.returncode == 2 and "evaluate.py changes only" in refused.stderr
 

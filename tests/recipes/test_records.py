@@ -1,5 +1,6 @@
-"""Job records (``hierloco/pipeline/records.py``): where a job's record goes, what it holds, when it counts as current.
-The study-level behaviour (a study taken whole from records on another machine) is in ``test_compare_recipe.py``."""
+"""Job records (``hierloco/pipeline/records.py``): where a job's record goes, what it holds, that it is verified on
+read, and when it counts as current. The study-level behaviour (a study taken whole from records on another machine)
+is in ``test_compare_recipe.py``."""
 
 import json
 import subprocess
@@ -8,23 +9,19 @@ from pathlib import Path
 
 import pytest
 
-from hierloco.pipeline.rundir import StageSpec, normalized
 from hierloco.pipeline import records
 from hierloco.pipeline.config import ConfigError
-from hierloco.pipeline.studies import check_records
+from hierloco.pipeline.rundir import StageSpec
 
 ROOT = Path(__file__).resolve().parents[2]
+SIGNATURE = {"method": "lat", "overrides": ["seed=0"]}
+KEY = {"params": {"lr": 1e-3}, "after": {"data": "abc"}}
+ROWS = [{"method": "lat", "seed": 0, "task": "goal_reaching", "episode": 0, "normalized_cost": 0.25,
+         "steps_to_goal": float("nan")}]
 
 
-def finished_run(path: Path, signature: dict, key: dict) -> Path:
-    path.mkdir(parents=True)
-    (path / "job.json").write_text(json.dumps({"signature": signature, "seconds": 12.0}))
-    (path / "episodes.csv").write_text("method,seed,task,episode,normalized_cost\nlat,0,goal_reaching,0,0.25\n")
-    (path / "model.pt").write_bytes(b"\0" * 1000)  # an artifact: not part of the record
-    (path / "model.pt.key.json").write_text(json.dumps(normalized(key)))
-    (path / "evaluation").mkdir()
-    (path / "evaluation" / "goals.npz.key.json").write_text(json.dumps(normalized(key)))  # a stage in a folder
-    return path
+def specs(key=KEY):
+    return [StageSpec("model", key, "model.pt"), StageSpec("evaluation_normal_goals", key, "evaluation/goals.npz")]
 
 
 def test_record_dir_keeps_the_run_directory_below_outputs(tmp_path, monkeypatch):
@@ -36,60 +33,77 @@ def test_record_dir_keeps_the_run_directory_below_outputs(tmp_path, monkeypatch)
         records.record_dir("rec", "outputs/../../x")
 
 
-def test_a_record_holds_the_small_files_and_is_current_only_with_todays_keys(tmp_path):
-    signature = {"method": "lat", "overrides": ["seed=0"]}
-    key = {"params": {"lr": 1e-3}, "code": "abc"}
-    run = finished_run(tmp_path / "outputs" / "lat" / "paper" / "a1_seed0", signature, key)
-    record = records.files_of(run)
-    assert set(record) == {"job.json", "episodes.csv", "model.pt.key.json", "evaluation/goals.npz.key.json"}
+def test_a_record_is_one_verified_file_current_only_with_todays_keys(tmp_path):
+    record = records.make_record(SIGNATURE, specs(), rows=ROWS, report={"stage_seconds": {"model": 1.0}},
+                                 builds={"model": {"seconds": 3.0}}, seconds=12.0)
     target = tmp_path / "rec" / "lat" / "paper" / "a1_seed0"
     assert records.save(record, target) and not records.save(record, target)  # the second writes nothing
-    spec = StageSpec("model", key, "model.pt")
-    assert records.current(target, signature, [spec, StageSpec("goals", key, "evaluation/goals.npz")])
-    assert records.rows(target)[0]["normalized_cost"] == 0.25
-    assert not records.current(target, {**signature, "overrides": ["seed=1"]}, [spec])
-    assert not records.current(target, signature, [StageSpec("model", {**key, "code": "def"}, "model.pt")])
-    assert not records.current(target, signature, [spec, StageSpec("other", key, "other.pt")])  # a stage it lacks
-    (target / "evaluation" / "stale.key.json").write_text("{}")
-    assert records.save(record, target) and not (target / "evaluation" / "stale.key.json").exists()  # whole
+    assert [p.name for p in target.iterdir()] == [records.RECORD]
+    read = records.read(target)
+    assert read["rows"][0]["normalized_cost"] == 0.25 and read["rows"][0]["steps_to_goal"] != 0.0  # nan kept
+    assert records.matches(read, SIGNATURE, specs())
+    assert not records.matches(read, {**SIGNATURE, "overrides": ["seed=1"]}, specs())  # another job
+    assert not records.matches(read, SIGNATURE, specs({**KEY, "after": {"data": "def"}}))  # a changed key
+    assert not records.matches(read, SIGNATURE, [*specs(), StageSpec("other", KEY, "other.pt")])  # a stage it lacks
 
 
-def test_a_finding_is_recorded_and_holds_only_while_the_stage_it_failed_in_keeps_its_key(tmp_path):
+def test_an_edited_or_incomplete_record_is_refused_naming_the_file(tmp_path):
+    target = tmp_path / "rec"
+    records.save(records.make_record(SIGNATURE, specs(), rows=ROWS), target)
+    path = target / records.RECORD
+    text = path.read_text()
+    path.write_text(text.replace('"normalized_cost": 0.25', '"normalized_cost": 0.0123'))
+    with pytest.raises(records.RecordError, match=f"record {path} was edited"):
+        records.read(target)
+    record = json.loads(text)
+    del record["stages"]
+    path.write_text(json.dumps(record))
+    with pytest.raises(records.RecordError, match="incomplete"):
+        records.read(target)
+    path.write_text("{not json")
+    with pytest.raises(records.RecordError, match="unreadable"):
+        records.read(target)
+
+
+def test_saving_a_record_deletes_nothing(tmp_path):
+    target = tmp_path / "rec"
+    target.mkdir()
+    (target / "experts.npz").write_bytes(b"an artifact someone keeps here")
+    (target / "notes.md").write_text("mine")
+    records.save(records.make_record(SIGNATURE, specs(), rows=ROWS), target)
+    assert sorted(p.name for p in target.iterdir()) == ["experts.npz", "notes.md", records.RECORD]
+
+
+def test_a_finding_holds_only_while_the_stage_it_failed_in_keeps_its_key(tmp_path):
     signature = {"method": "lat", "overrides": ["settings=[rear_limp]"]}
     key = {"params": {"samples": 500}, "after": {"low_level": "abc"}}
-    run = tmp_path / "outputs" / "lat" / "paper" / "a1_seed0_rear_limp"
-    run.mkdir(parents=True)
-    (run / "gait_policy.pt.key.json").write_text(json.dumps(normalized({"params": {}})))
-    (run / records.FAILED).write_text(json.dumps({"stage": "dynamics_data_rear_limp", "key": normalized(key),
-                                                  "error": "a1: 500 of 500 random actions ended in a fall"}))
-    record = records.failure_of(run, signature)
-    assert set(record) == {records.FAILED, "gait_policy.pt.key.json"}
-    target = tmp_path / "rec" / "lat" / "paper" / "a1_seed0_rear_limp"
-    records.save(record, target)
     failing = StageSpec("dynamics_data_rear_limp", key, "dynamics_data_rear_limp.npz")
-    assert records.finding(target, signature, [failing]) == "a1: 500 of 500 random actions ended in a fall"
-    assert records.finding(run, signature, [failing]) is None  # the recipe's own file has no job signature
-    assert records.finding(target, {**signature, "overrides": []}, [failing]) is None  # another job
+    finding = {"stage": failing.name, "key": key, "error": "a1: 500 of 500 random actions ended in a fall"}
+    target = tmp_path / "rec"
+    records.save(records.make_record(signature, [failing], finding=finding), target)
+    record = records.read(target)
+    assert records.finding_of(record, signature, [failing]) == finding["error"]
+    assert records.finding_of(record, {**signature, "overrides": []}, [failing]) is None  # another job
     upstream_changed = StageSpec(failing.name, {**key, "after": {"low_level": "def"}}, failing.filename)
-    assert records.finding(target, signature, [upstream_changed]) is None  # a changed low level: run it again
-    assert records.finding(target, signature, []) is None  # the stage is no longer planned
-    assert not records.current(target, signature, [failing])  # not a finished job's record
-
-
-def test_a_run_directory_without_a_finished_job_has_no_record(tmp_path):
-    (tmp_path / "run").mkdir()
-    with pytest.raises(ValueError, match="no finished job"):
-        records.files_of(tmp_path / "run")
+    assert records.finding_of(record, signature, [upstream_changed]) is None  # a changed low level: run it again
+    assert records.finding_of(record, signature, []) is None  # the stage is no longer planned
 
 
 def test_bad_records_settings_are_refused(tmp_path):
-    check_records(None)
-    check_records(str(tmp_path / "new"))
+    records.check_records(None)
+    records.check_records(str(tmp_path / "new"))
     (tmp_path / "file").write_text("x")
     with pytest.raises(ConfigError, match="not a directory"):
-        check_records(str(tmp_path / "file"))
+        records.check_records(str(tmp_path / "file"))
     with pytest.raises(ConfigError, match="directory path or null"):
-        check_records(3)
+        records.check_records(3)
+    run = tmp_path / "outputs" / "lat" / "paper" / "a1_seed0"
+    run.mkdir(parents=True)
+    (run / "run.json").write_text("{}")
+    with pytest.raises(ConfigError, match="holds a run directory"):  # records=outputs
+        records.check_records(str(tmp_path / "outputs"))
+    with pytest.raises(ConfigError, match="is \\(or is inside\\) the run directory"):
+        records.check_records(str(run / "records"))
 
 
 def test_a_study_refuses_a_records_file_in_one_line_before_any_job(tmp_path):
