@@ -1,7 +1,7 @@
 """The measured runs behind a claim: per-episode costs read from job records and tables, replicates pooled.
 
-A study keeps each finished job's *record* (``job.json``, ``episodes.csv``, ``builds.json``, ``report.json`` and the
-key of every stage; ``docs/statistics.md``). This module reads records, and per-episode tables without records,
+A study keeps each finished job's verified *record* (its rows, its stage keys, what its stages took;
+:mod:`hierloco.pipeline.records`, ``docs/statistics.md``). This module reads records, and per-episode tables without records,
 into :class:`Run` objects, one per job, setting and task, each labelled with what was run:
 
 - ``method``: the recipe of the job's signature, or its study name when the overrides make it a variant
@@ -20,15 +20,15 @@ run) into one value per seed, so each seed counts once in a test over seeds howe
 spread between machines enters the test through the per-seed values.
 
 Example (a record written here, then read back):
-    >>> import json, tempfile, pathlib
-    >>> root = pathlib.Path(tempfile.mkdtemp()) / "jobs"
-    >>> job = root / "lat" / "paper" / "a1_seed0"
-    >>> (job / "evaluation" / "normal").mkdir(parents=True)
-    >>> _ = (job / "job.json").write_text(json.dumps({"signature": {"method": "lat", "overrides": ["seed=0"]}}))
-    >>> _ = (job / "evaluation" / "normal" / "goal_reaching-0123456789ab.npz.key.json").write_text("{}")
-    >>> _ = (job / "episodes.csv").write_text("method,robot,setting,task,seed,episode,normalized_cost\\n"
-    ...     "lat,a1,normal,goal_reaching,0,0,0.1\\nlat,a1,normal,goal_reaching,0,1,nan\\n")
-    >>> [run] = read_records(root)
+    >>> import tempfile, pathlib
+    >>> from hierloco.pipeline import records
+    >>> from hierloco.pipeline.rundir import StageSpec
+    >>> job = pathlib.Path(tempfile.mkdtemp()) / "records" / "lat" / "paper" / "a1_seed0"
+    >>> rows = [{"method": "lat", "robot": "a1", "setting": "normal", "task": "goal_reaching", "seed": 0,
+    ...          "episode": e, "normalized_cost": c} for e, c in enumerate([0.1, float("nan")])]
+    >>> spec = StageSpec("evaluation_normal_goal_reaching", {}, "evaluation/normal/goal_reaching-0123456789ab.npz")
+    >>> _ = records.save(records.make_record({"method": "lat", "overrides": ["seed=0"]}, [spec], rows=rows), job)
+    >>> [run] = read_records(job.parents[2])
     >>> run.method, run.config, run.cost   # a fallen robot's NaN counts as 1
     ('lat', '0123456789ab', 0.55)
     >>> seeds, values, counts = seed_values([run])
@@ -54,8 +54,7 @@ VARIANTS: dict[str, tuple[str, tuple[str, ...]]] = {"ik_plain": ("ik", ("control
 # overrides that say where and how a job ran, not what it is
 BOOKKEEPING = ("preset", "robot", "seed", "progress", "settings", "eval.generalization", "eval.videos", "nthread",
                "robot_profile")
-FACTORS = {"latent_dim": ("gait_policy.pt.key.json", "latent_dim"),
-           "num_experts": ("experts.npz.key.json", "num_experts")}
+FACTORS = {"latent_dim": ("gait_policy.pt", "latent_dim"), "num_experts": ("experts.npz", "num_experts")}
 
 
 @dataclass(frozen=True)
@@ -160,15 +159,24 @@ def _runs_from_rows(rows: list[dict], **labels) -> list[Run]:
     return runs
 
 
+def _record(directory: Path) -> dict:
+    from hierloco.pipeline import records
+
+    return records.read(directory)
+
+
 def job_compute(record: str | os.PathLike) -> tuple[float, int, str]:
-    """A job's compute from its ``builds.json``: the minutes every stage took to build (a stage copied from another
-    run counts what building it took there), the most threads a stage had, and the CPU of its first stage
-    (``""`` when not recorded). ``(nan, 0, "")`` without the file.
+    """A job's compute from its record's ``builds``: the minutes every stage took to build (a stage copied from
+    another run counts what building it took there), the most threads a stage had, and the CPU of its first stage
+    (``""`` when not recorded). ``(nan, 0, "")`` without a record.
 
         >>> job_compute("/nonexistent")
         (nan, 0, '')
     """
-    builds = _json(Path(record) / "builds.json")
+    try:
+        builds = _record(Path(record))["builds"]
+    except ValueError:
+        return math.nan, 0, ""
     if not isinstance(builds, dict) or not builds:
         return math.nan, 0, ""
     seconds = sum(float(b.get("seconds", 0.0)) for b in builds.values() if isinstance(b, dict))
@@ -178,55 +186,65 @@ def job_compute(record: str | os.PathLike) -> tuple[float, int, str]:
 
 
 def read_records(root: str | os.PathLike, *, folder: str = "", variants: Mapping = VARIANTS) -> list[Run]:
-    """Every finished job's runs under ``root`` (a study's records directory: ``job.json`` beside
-    ``episodes.csv``, at any depth), labelled as in the module doc; ``folder`` names the study they belong to.
-    A record without ``episodes.csv`` (a finding, ``failed.json``) has no runs: see :func:`read_findings`."""
+    """Every finished job's runs under ``root`` (a study's records directory: one verified ``record.json`` per job,
+    at any depth; :mod:`hierloco.pipeline.records`), labelled as in the module doc; ``folder`` names the study they
+    belong to. A record of a finding has no runs: see :func:`read_findings`. An edited record raises."""
+    from hierloco.pipeline.records import RECORD
+
     runs = []
-    for job_file in sorted(Path(root).rglob("job.json")):
-        record = job_file.parent
-        if not (record / "episodes.csv").is_file():
+    for path in sorted(Path(root).rglob(RECORD)):
+        directory = path.parent
+        record = _record(directory)
+        if record["rows"] is None:
             continue
-        signature = (_json(job_file) or {}).get("signature", {})
+        signature = record["signature"]
         overrides = list(signature.get("overrides", []))
-        minutes, threads, job_cpu = job_compute(record)
-        builds = _json(record / "builds.json") or {}
+        stages = {filename: entry.get("key", {}) for filename, entry in record["stages"].items()}
+        minutes, threads, job_cpu = job_compute(directory)
+        builds = record["builds"] or {}
         factors = {}
-        for name, (key_file, param) in FACTORS.items():
-            key = _json(record / key_file)
+        for name, (stage_file, param) in FACTORS.items():
+            key = stages.get(stage_file)
             if key and param in key.get("params", {}):
                 factors[name] = key["params"][param]
-        experts = _json(record / "experts.npz.key.json") or {}
+        experts = stages.get("experts.npz") or {}
         for bound in ("command_low", "command_high"):
             if bound in experts.get("params", {}):
                 factors[bound] = tuple(experts["params"][bound])
         options = tuple(sorted(o for o in overrides if o.partition("=")[0].lstrip("+") not in BOOKKEEPING
                                and not any(o in needed for _, needed in variants.values())))
 
-        def per_group(setting, task, record=record, builds=builds, factors=factors, job_cpu=job_cpu):
-            keys = sorted(p.name.split(".")[0].rpartition("-")[2]
-                          for p in (record / "evaluation" / setting).glob(f"{task}-*.key.json"))
-            data = _json(record / f"dynamics_data_{setting}.npz.key.json") or {}
+        def per_group(setting, task, stages=stages, builds=builds, factors=factors, job_cpu=job_cpu):
+            prefix = f"evaluation/{setting}/{task}-"
+            keys = sorted(name.removeprefix(prefix).split(".")[0] for name in stages if name.startswith(prefix)
+                          and "-" not in name.removeprefix(prefix).split(".")[0])
+            data = stages.get(f"dynamics_data_{setting}.npz") or {}
             transitions = data.get("params", {}).get("num_transitions")
             stage = builds.get(f"evaluation_{setting}_{task}", {}) if isinstance(builds, dict) else {}
             more = dict(factors, **({"num_transitions": transitions} if transitions is not None else {}))
             cpu = stage.get("cpu", "") if isinstance(stage, dict) else ""
             return {"config": "+".join(keys), "cpu": cpu or job_cpu, "factors": tuple(sorted(more.items()))}
 
-        runs += _runs_from_rows(_rows(record / "episodes.csv"), method=method_of(signature, variants),
+        runs += _runs_from_rows(record["rows"], method=method_of(signature, variants),
                                 profile=_override(overrides, "robot_profile", "own"), folder=folder,
-                                record=record.as_posix(), minutes=minutes, threads=threads, options=options,
+                                record=directory.as_posix(), minutes=minutes, threads=threads, options=options,
                                 per_group=per_group)
     return runs
 
 
 def read_findings(root: str | os.PathLike, *, variants: Mapping = VARIANTS) -> list[dict]:
-    """The jobs under ``root`` that ended in a finding about their setting (``failed.json``): per record its
-    ``method``, ``robot``, ``seed``, ``profile``, ``settings``, the ``stage`` it stopped in and the ``error``."""
+    """The jobs under ``root`` that ended in a finding about their setting: per record its ``method``, ``robot``,
+    ``seed``, ``profile``, ``settings``, the ``stage`` it stopped in and the ``error``."""
+    from hierloco.pipeline.records import RECORD
+
     found = []
-    for path in sorted(Path(root).rglob("failed.json")):
-        failure = _json(path) or {}
-        overrides = failure.get("signature", {}).get("overrides", [])
-        found.append({"method": method_of(failure.get("signature", {}), variants),
+    for path in sorted(Path(root).rglob(RECORD)):
+        record = _record(path.parent)
+        failure = record["finding"]
+        if not failure:
+            continue
+        overrides = record["signature"].get("overrides", [])
+        found.append({"method": method_of(record["signature"], variants),
                       "robot": _override(overrides, "robot", ""), "seed": int(_override(overrides, "seed", -1)),
                       "profile": _override(overrides, "robot_profile", "own"),
                       "settings": _override(overrides, "settings", ""), "stage": failure.get("stage", ""),

@@ -62,18 +62,18 @@ class Study:
 
 
 STUDIES = (
-    Study("compare_full", ("compare_full/jobs", "records/compare_full"),
+    Study("compare_full", ("compare_full/records",),
           command="python recipes/compare/run.py 'robots=[a1,daisy]' 'seeds=[0,1,2]' "
-                  "records=results/compare_full/jobs"),
-    Study("adverse", ("adverse/jobs", "records/adverse"),
-          command="python recipes/adverse/run.py records=results/adverse/jobs out_dir=results/adverse"),
-    Study("hardware_a1", ("hardware/jobs", "records/hardware", "records/hardware_a1"),
-          command="python recipes/hardware/run.py 'robots=[a1]' records=results/hardware/jobs", robot="a1"),
-    Study("hardware_daisy", ("records/hardware_daisy",), table="hardware_daisy/hardware.csv",
+                  "records=results/compare_full/records"),
+    Study("adverse", ("adverse/records",),
+          command="python recipes/adverse/run.py records=results/adverse/records out_dir=results/adverse"),
+    Study("hardware_a1", ("hardware_a1/records",),
+          command="python recipes/hardware/run.py 'robots=[a1]' records=results/hardware_a1/records", robot="a1"),
+    Study("hardware_daisy", (), table="hardware_daisy/hardware.csv",
           command="python recipes/hardware/run.py 'robots=[daisy]' 'methods=[lat,ik]' 'seeds=[0,1,2]'", robot="daisy"),
-    Study("ablations", ("ablations/jobs", "records/ablations"),
-          command="python recipes/ablations/run.py records=results/ablations/jobs out_dir=results/ablations"),
-    Study("ablations/no_turn", ("ablations/no_turn/jobs", "records/ablations_no_turn", "records/ablations/no_turn"),
+    Study("ablations", ("ablations/records",),
+          command="python recipes/ablations/run.py records=results/ablations/records out_dir=results/ablations"),
+    Study("ablations/no_turn", ("ablations/no_turn/records",),
           command="python recipes/ablations/run.py trials=3 run=[latent_dim] 'ablations.latent_dim.values=[2,3]' "
                   "(experts that do not turn)"),
 )
@@ -492,7 +492,7 @@ def ours_text(check: Check, folders: dict | None = None, folder: str = "") -> st
 def design_counts(evidence: Evidence) -> list[str]:
     """The data each method used, counted from the comparison's records: high-level samples per task for SAC and
     SAC-SAC (``report.json``), CoM transitions for LAT (its stage key), for the paper's "3 times as much data"."""
-    import json
+    from hierloco.pipeline import records as job_records
 
     lines = []
     runs = evidence.runs.get("compare_full", [])
@@ -501,8 +501,8 @@ def design_counts(evidence: Evidence) -> list[str]:
         frames = []
         for record in records:
             try:
-                report = json.loads((Path(record) / "report.json").read_text())
-            except (OSError, ValueError):
+                report = job_records.read(record)["report"]
+            except job_records.RecordError:
                 continue
             frames.append(sum(int(report[f"sac_{t}"]["frames"]) for t in TASKS if f"sac_{t}" in report))
         if frames:
@@ -757,7 +757,7 @@ def fragile_page(evidence: Evidence, checks: dict[str, list[Check]]) -> str:
     lines = ["# Fragile claims: inconclusive, or decided differently by runs of the same configuration\n",
              _generated("the job records of " + ", ".join(f"`{v}`" for v in evidence.sources.values())) + "\n",
              "## How runs of one configuration are pooled\n",
-             "A configuration is what a run's evaluation stage key names (`*.key.json` in the record: every stage's "
+             "A configuration is what a run's evaluation stage key names (the stage keys in the record: every stage's "
              "parameters, the robot's fingerprint and the seed). Runs with the same key are the same job run again "
              "(another study, session or machine); on another CPU the floating-point differences grow, in a closed "
              "loop, into other numbers (below). They are samples of the same configuration and seed, so they are "
