@@ -19,3 +19,29 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 # down, which closed pytest's capture file and lost every later test's output. The process's own stderr is never
 # closed by absl.
 absl.logging.get_absl_handler().python_handler.stream = sys.__stderr__
+
+
+import shutil  # noqa: E402
+
+import pytest  # noqa: E402
+
+
+@pytest.fixture(scope="session")
+def tiny_lat_run(tmp_path_factory):
+    """A tiny LAT run on A1 (normal setting, a video of goal reaching), made once per session in this process.
+    Tests that change it take their own copy (:func:`copy_run`)."""
+    from tests.runner import run_in_process
+
+    run_dir = tmp_path_factory.mktemp("shared") / "lat_tiny"
+    result = run_in_process("lat", "preset=tiny", "progress=false", f"run_dir={run_dir}",
+                            env={"WANDB_MODE": "offline"})
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    return run_dir
+
+
+@pytest.fixture
+def copy_run(tiny_lat_run, tmp_path):
+    """A copy of the shared tiny LAT run, in this test's sandbox (``tmp_path/run``)."""
+    target = tmp_path / "run"
+    shutil.copytree(tiny_lat_run, target, ignore=shutil.ignore_patterns(".lock"))
+    return target

@@ -116,7 +116,12 @@ def make_record(signature: dict, specs: Iterable[StageSpec], *, rows: list[dict]
             "stages": {spec.filename: {"name": spec.name, "key": normalized(spec.key)} for spec in specs},
             "rows": _clean(rows) if rows is not None else None, "finding": finding,
             "report": _clean(report or {}), "builds": builds or {}, "seconds": seconds}
-    return {**body, "digest": _digest(body)}
+    return _restored({**body, "digest": _digest(body)})
+
+
+def _restored(record: dict) -> dict:
+    """A record as code uses it: non-finite numbers as floats (on disk they are strings, so the file is JSON)."""
+    return {**record, "rows": _restore(record["rows"]), "report": _restore(record["report"])}
 
 
 def read(directory: str | os.PathLike) -> dict:
@@ -138,14 +143,14 @@ def read(directory: str | os.PathLike) -> dict:
                           "restore it from git or remove it to run the job again")
     if (record["rows"] is None) == (record["finding"] is None):
         raise RecordError(f"record {path} holds neither rows nor a finding")
-    return {**record, "rows": _restore(record["rows"]), "report": _restore(record["report"])}
+    return _restored(record)
 
 
 def save(record: dict, directory: str | os.PathLike) -> bool:
     """Writes ``record`` as ``directory/record.json`` atomically (nothing else is written or removed); returns
     whether it changed."""
     path = Path(directory) / RECORD
-    text = json.dumps(record, indent=1, sort_keys=True) + "\n"
+    text = json.dumps(_clean(record), indent=1, sort_keys=True, allow_nan=False) + "\n"
     if path.is_file() and path.read_text() == text:
         return False
     write_text(path, text)

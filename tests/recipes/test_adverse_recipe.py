@@ -28,7 +28,9 @@ def test_adverse_tiny(tmp_path):
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
     assert "not evaluable: lat in" in result.stderr and "a1_seed0_rear_limp" in result.stderr
     assert "ended in a fall" in result.stderr
-    failure = json.loads((tmp_path / "records" / "lat" / "tiny" / "a1_seed0_rear_limp" / "failed.json").read_text())
+    from hierloco.pipeline import records
+
+    failure = records.read(tmp_path / "records" / "lat" / "tiny" / "a1_seed0_rear_limp")["finding"]
     assert failure["stage"] == "dynamics_data_rear_limp" and "ended in a fall" in failure["error"]
     runs = tmp_path / "outputs" / "adverse" / "tiny"  # the few-sample runs: in runs_dir, whatever out_dir is
     rows = read_csv(out / "adverse.csv")

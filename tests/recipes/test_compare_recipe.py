@@ -60,19 +60,22 @@ def test_compare_through_ray_equals_the_jobs_one_by_one(tmp_path):
     wallclock = (by_ray / "out" / "wallclock.md").read_text()
     assert "| lib | a1 | 2 |" in wallclock and "| ik | a1 | 2 |" in wallclock, wallclock
     assert wallclock.count("| 0 | yes |") == 4, wallclock  # every job reused, no stage without its build time
+    from hierloco.pipeline import records as job_records
     from hierloco.pipeline.report import job_compute
 
-    stages, _ = job_compute(str(by_ray / "outputs" / "ik" / "tiny" / "a1_seed0"))
+    ik_record = job_records.read(records / "ik" / "tiny" / "a1_seed0")
+    stages = job_compute(ik_record["report"], ik_record["builds"])
     assert "dynamics_data_normal" in stages and all(v is not None and v > 0 for v in stages.values()), stages
 
     # the study left a record of every job: its rows, stage keys and timings, without the artifacts; on a machine
     # without the run directories (another session, a cluster without shared storage) the study takes every job from
     # its record and writes the same table
     record = records / "ik" / "tiny" / "a1_seed1"
-    assert {"job.json", "episodes.csv", "results.csv", "report.json", "builds.json",
-            "dynamics_model_normal.pt.key.json"} <= {p.name for p in record.iterdir()}
+    assert [p.name for p in record.iterdir()] == [job_records.RECORD]
+    held = job_records.read(record)
+    assert "dynamics_model_normal.pt" in held["stages"] and held["rows"] and held["builds"] and held["report"]
     assert not list(records.rglob("*.pt")) and not list(records.rglob("*.npz"))
-    assert sum(p.stat().st_size for p in record.iterdir()) < 200_000
+    assert (record / job_records.RECORD).stat().st_size < 200_000
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
     planned = compare(elsewhere, f"out_dir={elsewhere / 'out'}", f"records={records}", "dry_run=true")
@@ -93,13 +96,14 @@ def test_compare_through_ray_equals_the_jobs_one_by_one(tmp_path):
         moved_wallclock
     # a record is taken only while its keys are today's: a stage key that differs makes its job run again here,
     # and the job's new record replaces the stale one
-    import json
+    from hierloco.pipeline.rundir import StageSpec
 
-    key_path = record / "dynamics_model_normal.pt.key.json"
-    fresh_key = key_path.read_text()
-    changed = json.loads(fresh_key)
-    changed["params"]["lr"] = 2 * changed["params"]["lr"]
-    key_path.write_text(json.dumps(changed))
+    older = {filename: StageSpec(entry["name"], entry["key"], filename) for filename, entry in held["stages"].items()}
+    changed = older["dynamics_model_normal.pt"].key
+    changed["params"]["lr"] = 2 * changed["params"]["lr"]  # as an older version of the code keyed it
+    job_records.save(job_records.make_record(held["signature"], older.values(), rows=held["rows"],
+                                             report=held["report"], builds=held["builds"], seconds=held["seconds"]),
+                     record)
     planned = compare(elsewhere, f"out_dir={elsewhere / 'out'}", f"records={records}", "dry_run=true")
     assert "study plan: 4 jobs, 3 finished, 1 to run: about" in planned.stdout, planned.stdout
     to_run = [line for line in planned.stdout.splitlines() if "| to run |" in line]
@@ -109,11 +113,14 @@ def test_compare_through_ray_equals_the_jobs_one_by_one(tmp_path):
     assert rerun.returncode == 0, rerun.stdout[-2000:] + rerun.stderr[-2000:]
     assert "study: 4 jobs, 0 reused from their run directories, 3 from their records" in rerun.stdout, rerun.stdout
     assert (elsewhere / "outputs" / "ik" / "tiny" / "a1_seed1" / "job.json").exists()
-    assert key_path.read_text() == fresh_key
+    assert job_records.read(record)["stages"]["dynamics_model_normal.pt"]["key"]["params"]["lr"] == \
+        changed["params"]["lr"] / 2  # the job's new record replaced the stale one
     assert comparable(read_csv(elsewhere / "out" / "comparison.csv")) == comparable(through_ray)
 
     # a finished job is reused only while every stage its recipe plans today has the key on disk: a stage made
     # with another config (as after a changed default) makes it run again, and the run names that stage
+    import json
+
     from hierloco.pipeline.studies import Job, finished
 
     run_dir = by_ray / "outputs" / "ik" / "tiny" / "a1_seed1"
