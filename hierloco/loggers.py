@@ -433,6 +433,30 @@ class RunLogger:
             self.loggers["wandb"].experiment.summary.update(stored)
         return path
 
+    def log_artifact(self, paths, name: str, kind: str = "model", metadata: Mapping[str, Any] | None = None) -> bool:
+        """Logs the file(s) ``paths`` as one wandb artifact ``name`` of type ``kind`` (checkpoints: ``model``),
+        offline too (``wandb sync`` uploads it with the run); returns whether an artifact was logged (no wandb:
+        nothing)."""
+        if "wandb" not in self.loggers:
+            return False
+        import wandb
+
+        clean = re.sub(r"[^A-Za-z0-9_.-]", "-", name)
+        artifact = wandb.Artifact(clean, type=kind, metadata=dict(metadata or {}))
+        for path in [paths] if isinstance(paths, (str, os.PathLike)) else paths:
+            artifact.add_file(str(path), name=Path(path).name)
+        self.loggers["wandb"].experiment.log_artifact(artifact)
+        return True
+
+    @property
+    def wandb_run(self) -> dict | None:
+        """``{"id", "project", "group", "mode", "dir"}`` of the wandb run this logger writes, or ``None``."""
+        if "wandb" not in self.loggers:
+            return None
+        run = self.loggers["wandb"].experiment
+        return {"id": run.id, "project": run.project, "group": run.group,
+                "mode": "offline" if run.settings.mode == "offline" else "online", "dir": str(run.dir)}
+
     # ------------------------------------------------------------------------------------------------ end
     def close(self) -> None:
         """Flushes and closes every backend (finishes the wandb run); calling it again does nothing."""
@@ -468,6 +492,8 @@ class NullLogger:
     def log_video(self, name, frames, fps=20, step=0) -> None: ...
     def log_table(self, name, rows, step=0) -> None: ...
     def summary(self, values) -> None: ...
+    def log_artifact(self, path, name, kind="model", metadata=None) -> bool: return False
+    wandb_run = None
     def close(self) -> None: ...
 
 

@@ -101,8 +101,26 @@ class TrainedRun:
         return make_planner(self.world_model(setting, task, device), seed=self.manifest["seed"], **options)
 
 
+def fetch_wandb_run(reference: str) -> Path:
+    """Downloads the ``hierloco-run`` artifact ``wandb:<entity>/<project>/<name>:<version>`` (logged by every
+    recipe run with the wandb backend) and returns its folder; needs wandb and its server."""
+    try:
+        import wandb
+    except ImportError:
+        raise ArtifactError(f"{reference}: loading a run from wandb needs wandb installed") from None
+    name = reference.removeprefix("wandb:")
+    try:
+        artifact = wandb.Api(timeout=10).artifact(name, type="hierloco-run")
+        return Path(artifact.download())
+    except Exception as error:  # noqa: BLE001  (no network, no login, no such artifact: one line)
+        raise ArtifactError(f"cannot fetch the wandb artifact {name}: {' '.join(str(error).split())[:200]}") from None
+
+
 def load_run(run_dir: str | os.PathLike) -> TrainedRun:
-    """Opens the run directory of a finished (or partly finished) model-based recipe run (LAT, LIB, IK)."""
+    """Opens the run directory of a finished (or partly finished) model-based recipe run (LAT, LIB, IK), or a run
+    logged to wandb (``"wandb:<entity>/<project>/<run>-run:<version>"``: its checkpoints artifact)."""
+    if isinstance(run_dir, str) and run_dir.startswith("wandb:"):
+        run_dir = fetch_wandb_run(run_dir)
     path = Path(run_dir)
     manifest_path = path / MANIFEST
     if not manifest_path.exists():

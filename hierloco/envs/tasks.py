@@ -91,7 +91,7 @@ def _points(name: str, value, what: str, min_points: int = 1) -> np.ndarray:
 
 
 class Task:
-    """Base class of the tasks. Subclasses define ``target`` and ``_tracking_error``.
+    """Base class of the tasks. A new type subclasses it with ``target`` and ``tracking_error`` (``docs/extending.md``).
 
     Attributes:
         kind: the registry name of the task's type (``"goal_reaching"``, ...).
@@ -119,7 +119,9 @@ class Task:
         """``... x 2`` target (a velocity in m/s or a position in m, world frame) at task step ``step``."""
         raise NotImplementedError
 
-    def _tracking_error(self, state, next_state, target) -> torch.Tensor:
+    def tracking_error(self, state, next_state, target) -> torch.Tensor:
+        """``...`` the error of the transition ``state -> next_state`` (``... x 5`` world) against ``target``
+        (``... x 2``, from :meth:`target`): m/s for a velocity target, m for a position."""
         raise NotImplementedError
 
     target_is_velocity: bool = False
@@ -151,7 +153,7 @@ class Task:
         position in m, world frame), for tensors ``... x 5``: usable where the target is an input (an exported
         planner)."""
         yaw_error = wrap_angle(self.start_yaw - next_com_state[..., 2]).abs()
-        return {"tracking": W_POSITION * self._tracking_error(com_state, next_com_state, target),
+        return {"tracking": W_POSITION * self.tracking_error(com_state, next_com_state, target),
                 "yaw": W_YAW * yaw_error}
 
     def cost_to_target(self, com_state: torch.Tensor, next_com_state: torch.Tensor,
@@ -220,7 +222,7 @@ class Task:
         """``E`` task-specific error at the end of each episode (m, or m/s for velocity tracking)."""
         last = torch.full_like(episodes, self.num_steps - 1)
         episodes, last = torch.broadcast_tensors(episodes, last)
-        return self._tracking_error(com_states[:, -2], com_states[:, -1], self.target(episodes, last).double())
+        return self.tracking_error(com_states[:, -2], com_states[:, -1], self.target(episodes, last).double())
 
     def markers(self, episode: int | None = None) -> np.ndarray:
         """``K x 2`` points to draw with the task (world frame, m): its goals or reference points; those of
@@ -294,7 +296,7 @@ class VelocityTracking(Task):
         index = (step // self.steps_per_target) % len(self.velocities)
         return self.velocities.to(index.device)[index]
 
-    def _tracking_error(self, state, next_state, target):
+    def tracking_error(self, state, next_state, target):
         velocity = (next_state[..., :2] - state[..., :2]) / self.step_duration
         return torch.linalg.vector_norm(target - velocity, dim=-1)
 
@@ -359,7 +361,7 @@ class GoalReaching(Task):
         return GoalReaching(goals=self.goals[self.training_episodes].numpy(), num_steps=self.num_steps,
                             name=f"{self.name}_train")
 
-    def _tracking_error(self, state, next_state, target):
+    def tracking_error(self, state, next_state, target):
         return torch.linalg.vector_norm(target - next_state[..., :2], dim=-1)
 
 
@@ -413,7 +415,7 @@ class TrajectoryTracking(Task):
     def target(self, episode, step):
         return self.references.to(step.device)[step.clamp(0, self.num_steps - 1)]
 
-    def _tracking_error(self, state, next_state, target):
+    def tracking_error(self, state, next_state, target):
         return torch.linalg.vector_norm(target - next_state[..., :2], dim=-1)
 
     def final_error(self, com_states, episodes):

@@ -142,9 +142,9 @@ def evaluate_main(arguments: list[str] | None = None) -> None:
         if multirun and name is not None and len(jobs) > 1:
             raise ConfigError("name= names one evaluation; a sweep names each by its overrides")
         for job in jobs:
-            label = name if name is not None or not multirun else re.sub(r"[^A-Za-z0-9_.=,-]", "_", ",".join(job))
-            label = label or "default"
-            if multirun:
+            label = name
+            if multirun and name is None:
+                label = re.sub(r"[^A-Za-z0-9_.=,-]", "_", ",".join(job)) or "default"
                 print(f"evaluation {label}: {' '.join(job) or '(the run config)'}", flush=True)
             evaluate(run_dir, job, label)
     except KeyboardInterrupt:

@@ -158,6 +158,18 @@ class Outputs:
         self._log(lambda: self.logger.summary(summary), "the tracker's summary")
         self._log(self.logger.close, "closing the trackers")
 
+    def log_checkpoints(self, stages, run_path: Path) -> None:
+        """The trained run as one tracker artifact of type ``hierloco-run`` (its ``run.json``, every trained
+        network ``*.pt`` and the expert library, each stage's key digest as metadata), which
+        ``hierloco.load_run("wandb:<entity>/<project>/<name>:<version>")`` opens again; wandb offline keeps it for
+        ``wandb sync``."""
+        files = [run_path / "run.json"] + [run_path / stage.filename for stage in stages
+                                           if stage.filename.endswith((".pt", "experts.npz"))]
+        files = [path for path in files if path.is_file()]
+        digests = {stage.name: stage.digest for stage in stages}
+        self._log(lambda: self.logger.log_artifact(files, f"{run_path.name}-run", "hierloco-run", digests),
+                  "logging the run's checkpoints")
+
 
 def environment_threads() -> list[str]:
     """Problems with the thread variables of the environment (``OMP_NUM_THREADS=abc``): each one line."""

@@ -227,6 +227,8 @@ class Run:
             self._write_report()
             outputs = Outputs(self.out, self.cfg, self.robot, self.method, self.logger)
             outputs.draw(self.evaluations, low_level)
+            if not self.evaluating:
+                outputs.log_checkpoints(self.plan.stages(), self.path)
             outputs.log(self.evaluations, rows, headline, self.dir.timings, self.reports.get("timings", {}))
             self.reports["total_seconds"] = time.perf_counter() - self.start
             if outputs.warnings:
@@ -322,6 +324,11 @@ def open_run(cfg: DictConfig, method: str, plan: Callable, checks: Callable | No
                 with temporaries_in(directory.path):
                     write_text(directory.path / MANIFEST, json.dumps(info, indent=2))
             logger = open_logger(cfg, method, robot, directory.path)
+            if evaluation_out is None and logger.wandb_run is not None:  # where this run's tracker is
+                manifest_path = directory.path / MANIFEST
+                info = {**json.loads(manifest_path.read_text()), "wandb": logger.wandb_run}
+                with temporaries_in(directory.path):
+                    write_text(manifest_path, json.dumps(info, indent=2))
     except BaseException:
         directory.release()
         raise

@@ -480,7 +480,7 @@ def test_cost_is_the_sum_of_the_named_terms(name):
     target = task.target(episode, step)
     yaw = wrap_angle(START_YAW - next_state[:, 2]).abs()
     assert torch.equal(terms["yaw"], 1.0 * yaw)
-    assert torch.equal(terms["tracking"], 2.0 * task._tracking_error(state, next_state, target))
+    assert torch.equal(terms["tracking"], 2.0 * task.tracking_error(state, next_state, target))
 
 
 def test_task_result_carries_the_mean_cost_terms():
