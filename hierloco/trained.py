@@ -123,10 +123,35 @@ class TrainedRun:
         """The learned CoM world model env of ``setting``, scoring with ``task`` (a :class:`hierloco.envs.Task`)."""
         return make_world_model(self.com_model(setting).model, self.low_level(), task=task, device=device)
 
-    def planner(self, task=None, setting: str = "normal", device: str = "cpu", **overrides):
-        """The run's MPC planner (its recorded settings, changed by ``overrides``) over :meth:`world_model`."""
+    def dynamics_data(self, setting: str = "normal"):
+        """The CoM dynamics data of ``setting`` (a :class:`~hierloco.components.dynamics_data.TransitionData`:
+        ``com_state``, ``action``, ``next_com_state``, ``M x 5`` / ``M x A`` / ``M x 5``), e.g. to train another
+        model on it: ``train_com_model(d.com_state, run.low_level().action_features(d.action), d.next_com_state,
+        model="ensemble")``."""
+        from hierloco.components.dynamics_data import TransitionData
+
+        if setting not in self.settings:
+            raise ValueError(f"{self.path} was trained for settings {self.settings}, not {setting!r}")
+        return TransitionData.load(self._artifact(f"dynamics_data_{setting}.npz"))
+
+    def planner(self, task=None, setting: str = "normal", device: str = "cpu", *, model=None, cost=None,
+                risk: str = "none", beta: float = 1.0, **overrides):
+        """The run's MPC planner (its recorded settings, changed by ``overrides``) over :meth:`world_model`.
+
+        Args:
+            task: the task planned for (its cost, unless ``cost`` is given; :meth:`begin_task` changes it).
+            model: plan with this CoM model instead of the run's (a :class:`~hierloco.components.com_model.
+                TrainedCoMModel` or a model with ``predict``, e.g. an ensemble trained on :meth:`dynamics_data`).
+            cost: a cost callable ``(com_state, next_com_state, action, info)`` used instead of the task's
+                (:class:`~hierloco.envs.world_model.CoMWorldModelEnv`).
+            risk, beta: how a model with members scores a plan (``none``, ``mean_std``, ``pessimistic``).
+        """
         options = {**self.manifest["planner"], **overrides}
-        return make_planner(self.world_model(setting, task, device), seed=self.manifest["seed"], **options)
+        model = self.com_model(setting) if model is None else model
+        world_model = make_world_model(getattr(model, "model", model), self.low_level(), task=task, device=device)
+        world_model.set_cost(cost)
+        world_model.set_risk(risk, beta)
+        return make_planner(world_model, seed=self.manifest["seed"], **options)
 
 
 def load_run(run_dir: str | os.PathLike) -> TrainedRun:

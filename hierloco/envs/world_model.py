@@ -165,6 +165,16 @@ class _StepModule(TensorDictModuleBase):
         return tensordict.update(dict(zip(self.out_keys, self.module.particles_forward(*inputs, particles, spent))))
 
 
+def _check_risk(model: nn.Module, risk: str, beta: float) -> None:
+    if risk not in RISKS:
+        raise ValueError(f"risk must be one of {', '.join(RISKS)}, got {risk!r}")
+    if isinstance(beta, bool) or not isinstance(beta, (int, float)) or beta != beta or abs(beta) == float("inf"):
+        raise ValueError(f"beta must be a finite number, got {beta!r}")
+    if risk != "none" and not hasattr(model, "predict_particles"):
+        raise ValueError(f"risk {risk!r} needs a model with members (e.g. the ensemble); {type(model).__name__} "
+                         "predicts one state")
+
+
 class CoMWorldModelEnv(ModelBasedEnvBase):
     """A world model env over a learned CoM dynamics model (anything with ``predict(com_state, action)``).
 
@@ -188,14 +198,7 @@ class CoMWorldModelEnv(ModelBasedEnvBase):
                  action_high: Sequence[float] | None = None, num_choices: int | None = None,
                  task: Task | None = None, action_features=None, device: str = "cpu", cost: Cost | None = None,
                  risk: str = "none", beta: float = 1.0, seed: int = 0):
-        if risk not in RISKS:
-            raise ValueError(f"risk must be one of {', '.join(RISKS)}, got {risk!r}")
-        if not (isinstance(beta, (int, float)) and not isinstance(beta, bool) and beta == beta):
-            raise ValueError(f"beta must be a number, got {beta!r}")
-        particles = hasattr(model, "predict_particles")
-        if risk != "none" and not particles:
-            raise ValueError(f"risk {risk!r} needs a model with members (e.g. the ensemble); "
-                             f"{type(model).__name__} predicts one state")
+        _check_risk(model, risk, beta)
         if cost is not None and not callable(cost):
             raise ValueError(f"cost must be a callable (com_state, next_com_state, action, info), got {cost!r}")
         self.generator = torch.Generator().manual_seed(int(seed))
@@ -242,6 +245,13 @@ class CoMWorldModelEnv(ModelBasedEnvBase):
             raise ValueError(f"cost must be a callable (com_state, next_com_state, action, info), got {cost!r}")
         self.cost = cost
         self.world_model.module.cost = cost
+
+    def set_risk(self, risk: str = "none", beta: float = 1.0) -> None:
+        """Aggregates the particles' costs by ``risk`` (``none``, ``mean_std`` with ``beta``, ``pessimistic``) from
+        now on."""
+        _check_risk(self.model, risk, beta)
+        self.risk, self.beta = risk, float(beta)
+        self.world_model.module.risk, self.world_model.module.beta = risk, float(beta)
 
     def initial_state(self, com_state: torch.Tensor | None = None, episode=0, step=0) -> TensorDict:
         """A state TensorDict: ``com_state`` (default: the task's start) at ``task_episode``/``task_step``."""
