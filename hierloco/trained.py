@@ -135,7 +135,7 @@ class TrainedRun:
         return TransitionData.load(self._artifact(f"dynamics_data_{setting}.npz"))
 
     def planner(self, task=None, setting: str = "normal", device: str = "cpu", *, model=None, cost=None,
-                risk: str = "none", beta: float = 1.0, **overrides):
+                risk: str | None = None, beta: float | None = None, **overrides):
         """The run's MPC planner (its recorded settings, changed by ``overrides``) over :meth:`world_model`.
 
         Args:
@@ -144,9 +144,12 @@ class TrainedRun:
                 TrainedCoMModel` or a model with ``predict``, e.g. an ensemble trained on :meth:`dynamics_data`).
             cost: a cost callable ``(com_state, next_com_state, action, info)`` used instead of the task's
                 (:class:`~hierloco.envs.world_model.CoMWorldModelEnv`).
-            risk, beta: how a model with members scores a plan (``none``, ``mean_std``, ``pessimistic``).
+            risk, beta: how a model with members scores a plan (``none``, ``mean_std`` with ``beta``,
+                ``pessimistic``); default the run's ``planner.risk`` and ``planner.beta``, else ``none``.
         """
         options = {**self.manifest["planner"], **overrides}
+        risk = options.pop("risk", "none") if risk is None else risk
+        beta = options.pop("beta", 1.0) if beta is None else beta
         model = self.com_model(setting) if model is None else model
         world_model = make_world_model(getattr(model, "model", model), self.low_level(), task=task, device=device)
         world_model.set_cost(cost)
