@@ -9,6 +9,7 @@ task (1 = no better than standing still).
 
     python benchmarks/ensemble_risk.py outputs/lat/paper/a1_seed0
     python benchmarks/ensemble_risk.py RUN_DIR --setting legs_disabled --members 5 --tasks velocity_tracking
+    python benchmarks/ensemble_risk.py RUN_DIR --num-transitions 300 --num-candidates 1000   # data-poor, cheaper
 
 The paper-scale study is this script over the comparison's LAT and IK run directories (both robots, normal and
 legs disabled, seeds 0-2): one row per run, setting, task and model.
@@ -34,17 +35,26 @@ TRAINING_KEYS = ("hidden", "lr", "batch_size", "holdout", "patience", "max_epoch
 
 def ensemble_study(run_dir, *, setting: str = "normal", members: int = 5, head: str = "gaussian",
                    propagation: str = "ts", risks=RISKS, tasks=("velocity_tracking", "goal_reaching"),
-                   nthread: int | None = None, progress: bool = False) -> dict:
+                   num_transitions: int | None = None, nthread: int | None = None, progress: bool = False,
+                   **planner_overrides) -> dict:
     """Trains the ensemble on ``run_dir``'s dynamics data of ``setting`` and plans with it; returns a report with
     ``models`` (held-out figures of the run's MLP and of the ensemble) and ``planning`` (one row per task and model:
-    mean and std of the normalised cost over the task's episodes, the success rate, seconds per planner call)."""
+    mean and std of the normalised cost over the task's episodes, the success rate, seconds per planner call).
+
+    ``num_transitions`` keeps only the first transitions of the data (a data-poor regime) and then trains the MLP
+    again on them too, with the run's settings; ``planner_overrides`` change the run's planner (e.g.
+    ``num_candidates``)."""
     run = load_run(run_dir)
     mlp = run.com_model(setting)
     data = run.dynamics_data(setting)
     low_level = run.low_level()
     features = low_level.action_features(data.action)
     options = {key: mlp.metadata[key] for key in TRAINING_KEYS if key in mlp.metadata}
-    ensemble = train_com_model(data.com_state, features, data.next_com_state, model="ensemble", members=members,
+    state, next_state = data.com_state, data.next_com_state
+    if num_transitions is not None:
+        state, features, next_state = (x[:num_transitions] for x in (state, features, next_state))
+        mlp = train_com_model(state, features, next_state, progress=progress, **options)
+    ensemble = train_com_model(state, features, next_state, model="ensemble", members=members,
                                head=head, propagation=propagation, progress=progress, **options)
     report_keys = ("heldout_loss", "heldout_rmse", "heldout_nll", "heldout_coverage_2std", "heldout_member_std",
                    "best_epoch", "train_seconds", "num_train", "num_heldout")
@@ -55,7 +65,7 @@ def ensemble_study(run_dir, *, setting: str = "normal", members: int = 5, head: 
     for task_name in tasks:
         task = make_task(task_name)
         for name, model, risk, beta in variants:
-            planner = run.planner(task, setting, model=model, risk=risk, beta=beta)
+            planner = run.planner(task, setting, model=model, risk=risk, beta=beta, **planner_overrides)
             env = LatentActionEnv(run.low_level(task.num_episodes), num_robots=task.num_episodes,
                                   seed=run.manifest["seed"], nthread=nthread)
             start = time.perf_counter()
@@ -70,7 +80,8 @@ def ensemble_study(run_dir, *, setting: str = "normal", members: int = 5, head: 
                              "success": float(np.nanmean(result.success)) if task.has_success else None,
                              "fell": int(rollout.fell.sum()), "plan_seconds": rollout.plan_seconds,
                              "seconds": time.perf_counter() - start})
-    return {"run_dir": str(run_dir), "setting": setting, "ensemble": ensemble.metadata["model_options"],
+    return {"run_dir": str(run_dir), "setting": setting, "num_transitions": len(state),
+            "planner": {**run.manifest["planner"], **planner_overrides}, "ensemble": ensemble.metadata["model_options"],
             "models": models, "planning": planning}
 
 
@@ -83,11 +94,15 @@ def main(argv=None) -> int:
     parser.add_argument("--propagation", default="ts", choices=("ts", "mm", "expectation"))
     parser.add_argument("--beta", type=float, default=1.0, help="the weight of the std in risk mean_std")
     parser.add_argument("--tasks", nargs="+", default=["velocity_tracking", "goal_reaching"])
+    parser.add_argument("--num-transitions", type=int, help="keep only the first transitions (MLP retrained too)")
+    parser.add_argument("--num-candidates", type=int, help="the planner's samples (default: the run's)")
     parser.add_argument("--json", help="also write the report here")
     args = parser.parse_args(argv)
     risks = (("none", 0.0), ("mean_std", args.beta), ("pessimistic", 0.0))
+    overrides = {} if args.num_candidates is None else {"num_candidates": args.num_candidates}
     report = ensemble_study(args.run_dir, setting=args.setting, members=args.members, head=args.head,
-                            propagation=args.propagation, risks=risks, tasks=args.tasks)
+                            propagation=args.propagation, risks=risks, tasks=args.tasks,
+                            num_transitions=args.num_transitions, **overrides)
     for name, figures in report["models"].items():
         extra = "" if figures["heldout_nll"] is None else (f", NLL {figures['heldout_nll']:.3f}, 2-std coverage "
                                                            f"{figures['heldout_coverage_2std']:.3f}")
