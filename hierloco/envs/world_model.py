@@ -201,7 +201,7 @@ class CoMWorldModelEnv(ModelBasedEnvBase):
         _check_risk(model, risk, beta)
         if cost is not None and not callable(cost):
             raise ValueError(f"cost must be a callable (com_state, next_com_state, action, info), got {cost!r}")
-        self.generator = torch.Generator().manual_seed(int(seed))
+        self.generator = torch.Generator(device=device).manual_seed(int(seed))
         step = _CoMStep(model, task, cost, action_features, risk=risk, beta=beta, generator=self.generator)
         super().__init__(_StepModule(step), device=device)
         self.model = model
