@@ -16,7 +16,13 @@ file stem                  inputs -> outputs (float32)                          
 ``score_goal_reaching``    ``com_state`` B x 5, ``candidates`` B x S x H x A,            ``dynamics_model_<setting>``
                            ``target`` B x H x 2 (goal, m) -> ``cost`` B x S
 ``score_velocity_tracking`` same, ``target`` B x H x 2 (velocity, m/s) -> ``cost`` B x S  ``dynamics_model_<setting>``
+``com_model_members``      ``com_state`` B x 5, ``action`` B x A -> B x M x 5            an ensemble's
 =========================  ===========================================================  ============================
+
+The dynamics model is any model of the registry :data:`hierloco.components.com_model.MODELS` (its checkpoint names
+it): the paper's MLP, or the probabilistic ensemble, whose exported prediction is its members' mean (the planner's
+scoring with that mean) and which also exports every member's prediction (``com_model_members``, M members), for a
+risk-aware planner on the robot.
 
 CoM states are world-frame ``(x, y, yaw, vx, vy)`` in m, rad, m/s. The scoring rolls the model ``H`` actions ahead
 and sums the task cost ``w1 |target - .| + w2 |yaw_target - yaw|`` of every step (``[w1, w2] = [2, 1]``, the yaw
@@ -60,7 +66,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from hierloco.components.com_model import CoMDynamicsModel, TrainedCoMModel
+from hierloco.components.com_model import CoMDynamicsModel, TrainedCoMModel, model_name
 from hierloco.components.gait_policy import LatentGaitPolicy, TrainedGaitPolicy
 from hierloco.envs.robots import CONTROL_TIMESTEP, get_robot
 from hierloco.envs.tasks import GoalReaching, Task, VelocityTracking, W_POSITION, W_YAW
@@ -104,6 +110,18 @@ class CoMPredict(nn.Module):
 
     def forward(self, com_state: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
         return self.model.predict(com_state, action)
+
+
+class CoMMembers(nn.Module):
+    """``com_state`` ``B x 5`` and ``action`` ``B x A`` -> each member's world-frame next state ``B x M x 5`` (a model
+    with members: the ensemble)."""
+
+    def __init__(self, model: nn.Module):
+        super().__init__()
+        self.model = model
+
+    def forward(self, com_state: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+        return self.model.predict_members(com_state, action)
 
 
 class CoMPlannerStep(nn.Module):
@@ -380,8 +398,10 @@ def export_run(run_dir: str | os.PathLike, out_dir: str | os.PathLike, *, settin
         manifest["action"] = action_entry
         manifest["com_state"] = {"names": ["x", "y", "yaw", "vx", "vy"], "units": ["m", "m", "rad", "m/s", "m/s"],
                                  "frame": "world"}
-        manifest["dynamics_model"] = {k: trained_model.metadata.get(k) for k in
-                                      ("heldout_rmse", "output_names", "num_train", "duration")}
+        manifest["dynamics_model"] = {"model": model_name(model),
+                                      "options": {k: v for k, v in model.config().items() if k != "action_dim"},
+                                      **{k: trained_model.metadata.get(k) for k in
+                                         ("heldout_rmse", "output_names", "num_train", "duration")}}
         box_low, box_high = _action_box(low_level, a_dim)
 
         def actions(*shape):
@@ -404,6 +424,15 @@ def export_run(run_dir: str | os.PathLike, out_dir: str | os.PathLike, *, settin
               [{"name": "next_com_state", "shape": ["B", "S", 5], "dtype": "float32", "units": COM_STATE_UNITS}],
               (_random_states(generator, 2), actions(2, 7)),
               [(_random_states(generator, 1), actions(1, 1)), (_random_states(generator, 3), actions(3, 500))])
+        if hasattr(model, "predict_members"):
+            members = model.num_members
+            write("com_model_members", CoMMembers(model),
+                  f"each of the {members} ensemble members' prediction over one action: world-frame states after it",
+                  [state, {"name": "action", "shape": ["B", a_dim], "dtype": "float32", "units": action_units}],
+                  [{"name": "next_com_state_members", "shape": ["B", members, 5], "dtype": "float32",
+                    "units": COM_STATE_UNITS}],
+                  (_random_states(generator, 3), actions(3)),
+                  [(_random_states(generator, 1), actions(1)), (_random_states(generator, 7), actions(7))])
         goal, velocity = GoalReaching(), VelocityTracking()
         manifest["cost"] = {"w_position": W_POSITION, "w_yaw": W_YAW, "yaw_target_rad": goal.start_yaw,
                             "step_duration_s": velocity.step_duration, "horizon": horizon}
@@ -450,7 +479,7 @@ def _versions(*packages: str) -> dict[str, str | None]:
     return versions
 
 
-__all__ = ["CoMPlannerStep", "CoMPredict", "GaitPolicyPattern", "GaitPolicyStep", "TaskScoring", "export_run"]
+__all__ = ["CoMMembers", "CoMPlannerStep", "CoMPredict", "GaitPolicyPattern", "GaitPolicyStep", "TaskScoring", "export_run"]
 
 
 def main(argv=None) -> int:

@@ -93,12 +93,40 @@ class TrainedRun:
         """The learned CoM world model env of ``setting``, scoring with ``task`` (a :class:`hierloco.envs.Task`)."""
         return make_world_model(self.com_model(setting).model, self.low_level(device=device), task=task, device=device)
 
-    def planner(self, task=None, setting: str = "normal", device: str = "cpu", **overrides):
-        """The run's MPC planner (its recorded settings, changed by ``overrides``) over :meth:`world_model`."""
+    def dynamics_data(self, setting: str = "normal"):
+        """The CoM dynamics data of ``setting`` (a :class:`~hierloco.components.dynamics_data.TransitionData`:
+        ``com_state``, ``action``, ``next_com_state``, ``M x 5`` / ``M x A`` / ``M x 5``), e.g. to train another
+        model on it: ``train_com_model(d.com_state, run.low_level().action_features(d.action), d.next_com_state,
+        model="ensemble")``."""
+        from hierloco.components.dynamics_data import TransitionData
+
+        if setting not in self.settings:
+            raise ValueError(f"{self.path} was trained for settings {self.settings}, not {setting!r}")
+        return TransitionData.load(self.artifact(f"dynamics_data_{setting}.npz"))
+
+    def planner(self, task=None, setting: str = "normal", device: str = "cpu", *, model=None, cost=None,
+                risk: str | None = None, beta: float | None = None, **overrides):
+        """The run's MPC planner (its recorded settings, changed by ``overrides``) over :meth:`world_model`.
+
+        Args:
+            task: the task planned for (its cost, unless ``cost`` is given; :meth:`begin_task` changes it).
+            model: plan with this CoM model instead of the run's (a :class:`~hierloco.components.com_model.
+                TrainedCoMModel` or a model with ``predict``, e.g. an ensemble trained on :meth:`dynamics_data`).
+            cost: a cost callable ``(com_state, next_com_state, action, info)`` used instead of the task's
+                (:class:`~hierloco.envs.world_model.CoMWorldModelEnv`).
+            risk, beta: how a model with members scores a plan (``none``, ``mean_std`` with ``beta``,
+                ``pessimistic``); default the run's ``planner.risk`` and ``planner.beta``, else ``none``.
+        """
         from hierloco.components.planners import make_planner
 
         options = {**self.manifest["planner"], **overrides}
-        return make_planner(self.world_model(setting, task, device), seed=self.manifest["seed"], **options)
+        risk = options.pop("risk", "none") if risk is None else risk
+        beta = options.pop("beta", 1.0) if beta is None else beta
+        model = self.com_model(setting) if model is None else model
+        world_model = make_world_model(getattr(model, "model", model), self.low_level(), task=task, device=device)
+        world_model.set_cost(cost)
+        world_model.set_risk(risk, beta)
+        return make_planner(world_model, seed=self.manifest["seed"], **options)
 
 
 def fetch_wandb_run(reference: str) -> Path:

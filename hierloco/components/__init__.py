@@ -3,16 +3,20 @@
 - ``kinematics``: generic leg FK/IK from the MuJoCo model. ``experts``: the Raibert footstep controller.
 - ``expert_library``: recorded expert gaits. ``gait_policy``: the latent gait policy ``pi(t, z)``.
 - ``low_level``: latent, expert-replay and command low levels. ``dynamics_data``: random-action transitions.
-- ``com_model``: the local-frame CoM dynamics model. ``planners``: random shooting, CEM, MPPI, exhaustive MPC.
+- ``com_model``: the local-frame CoM dynamics model and the registry of models (``MODELS``: ``mlp``, ``ensemble``).
+  ``com_ensemble``: the probabilistic ensemble (PETS). ``planners``: random shooting, CEM, MPPI, exhaustive MPC.
 - ``policies``: the task-policy protocol of closed-loop evaluation. ``evaluation``: closed-loop task episodes and
   gait-policy checks. ``sac``: the SAC agent and its batched training loop. ``sac_low_level``: SAC-SAC's 100 Hz
   velocity-tracking low level and its tracking evaluation.
 """
 
+from hierloco.components.com_ensemble import CoMEnsembleModel
 from hierloco.components.com_model import (
+    MODELS,
     CoMDynamicsModel,
     TrainedCoMModel,
     apply_delta,
+    com_model_module,
     holdout_split,
     local_transition,
     train_com_model,
@@ -37,7 +41,8 @@ from hierloco.components.sac import SACAgent, train_sac
 from hierloco.components.sac_low_level import SACLowLevel, TrainedSACLowLevel, train_sac_low_level
 
 __all__ = [
-    "PLANNERS", "ActorPolicy", "BoxCEMPlanner", "BoxMPPIPlanner", "BoxPlannerBase", "CoMDynamicsModel",
+    "MODELS", "PLANNERS", "ActorPolicy", "BoxCEMPlanner", "BoxMPPIPlanner", "BoxPlannerBase", "CoMDynamicsModel",
+    "CoMEnsembleModel", "com_model_module",
     "CommandLowLevel", "ExhaustivePlanner", "ExpertLibrary", "ExpertReplayLowLevel", "LatentGaitPolicy",
     "LatentLowLevel", "LegKinematics", "LowLevel", "RaibertController", "RandomShootingPlanner", "SACAgent",
     "SACLowLevel", "TaskPolicy", "TaskRollout", "TrainedCoMModel", "TrainedGaitPolicy", "TrainedSACLowLevel", "TransitionData", "UniformActionPolicy",

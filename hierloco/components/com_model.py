@@ -17,6 +17,14 @@ predicting standardised outputs; the statistics are buffers, so the module maps 
 :func:`train_com_model` fits it by MSE on the standardised outputs with Adam, holds out a seeded random 10 % and
 stops early on the held-out loss.
 
+Models are a registry, :data:`MODELS` (``dynamics_model``): the MLP above is ``mlp``, the probabilistic ensemble of
+:mod:`hierloco.components.com_ensemble` (PETS, Chua et al., NeurIPS 2018) is ``ensemble``. A model's options are its
+constructor's keyword arguments (``MODELS.options("ensemble")``); :func:`train_com_model` trains any of them by name
+(``model="ensemble", members=5``), checkpoints record the name and options, and :meth:`TrainedCoMModel.load`
+rebuilds the model from the registry. A new model is one registered class with ``predict(com_state, action)`` and
+the training hooks of :class:`CoMDynamicsModel` (``training_rows``, ``epoch_order``, ``training_loss``,
+``heldout_loss``). :func:`com_model_module` wraps any of them as a TensorDict module.
+
 Example:
     >>> import torch
     >>> model = CoMDynamicsModel(action_dim=3, hidden=64)
@@ -40,11 +48,15 @@ from tqdm.auto import tqdm
 
 from hierloco.envs.frames import local_to_world, world_to_local, wrap_angle
 from hierloco.io import ArtifactError, load_checkpoint, save_checkpoint
+from hierloco.registry import Registry
 
 CHECKPOINT_FORMAT = 1
 CHECKPOINT_KIND = "com_model"
 OUTPUT_NAMES = ("dx", "dy", "dyaw", "vx_next", "vy_next")
 MIN_TRANSITIONS = 10
+
+MODELS = Registry("dynamics_model", context=("action_dim", "input_mean", "input_std", "output_mean", "output_std"))
+"""The CoM dynamics models by name (``mlp``, ``ensemble``); options are their constructors' keyword arguments."""
 
 
 def _as_float_tensor(x) -> torch.Tensor:
@@ -117,6 +129,7 @@ def _nonzero_std(std: torch.Tensor) -> torch.Tensor:
     return torch.where(std > 1e-6, std, torch.ones_like(std))
 
 
+@MODELS.register("mlp")
 class CoMDynamicsModel(nn.Module):
     """``f(v_local, a)``: velocity ``... x 2`` (m/s) and action ``... x A`` -> delta ``... x 5`` (see the module doc).
 
@@ -185,25 +198,109 @@ class CoMDynamicsModel(nn.Module):
     def config(self) -> dict:
         return {"action_dim": self.action_dim, "hidden": self.hidden}
 
+    # ---------------------------------------------------------------- training hooks (see train_com_model)
+    def training_rows(self, num_train: int, generator: torch.Generator) -> None:
+        """The rows each part of the model learns from: all of them (nothing drawn)."""
+        return None
+
+    def epoch_order(self, rows, num_train: int, generator: torch.Generator) -> torch.Tensor:
+        """``num_train``: the training rows in a new random order for one epoch."""
+        return torch.randperm(num_train, generator=generator)
+
+    def training_loss(self, x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+        """The MSE of the standardised delta on ``b x (2 + A)`` standardised inputs and ``b x 5`` targets."""
+        return ((self.net(x) - y) ** 2).mean()
+
+    @torch.no_grad()
+    def heldout_loss(self, x: torch.Tensor, y: torch.Tensor) -> float:
+        """The standardised MSE on held-out rows (what early stopping watches)."""
+        return float(((self.net(x) - y) ** 2).mean())
+
+    def heldout_report(self, x: torch.Tensor, y: torch.Tensor) -> dict:
+        """Nothing beyond the RMSE for a point model."""
+        return {}
+
+
+def model_name(model: nn.Module) -> str:
+    """The registry name of a CoM model (``mlp`` for :class:`CoMDynamicsModel`)."""
+    name = getattr(type(model), "registry_name", None)
+    if name is None or name not in MODELS or MODELS[name] is not type(model):
+        raise ValueError(f"{type(model).__name__} is not a registered dynamics model ({', '.join(MODELS.names())})")
+    return name
+
+
+class _PredictWithSpread(nn.Module):
+    """``(com_state, action)`` -> the mean next state and, for a model with members, their spread and predictions."""
+
+    def __init__(self, model: nn.Module):
+        super().__init__()
+        self.model = model
+        self.has_members = hasattr(model, "predict_members")
+
+    def forward(self, com_state: torch.Tensor, action: torch.Tensor):
+        if not self.has_members:
+            return self.model.predict(com_state, action)
+        from hierloco.envs.world_model import particle_moments
+
+        members = self.model.predict_members(com_state, action)
+        _, spread = particle_moments(members)
+        return self.model.predict(com_state, action), spread, members
+
+
+def com_model_module(model: nn.Module, *, state_key="com_state", action_key="action",
+                     out_key=("next", "com_state")):
+    """A CoM model as a :class:`tensordict.nn.TensorDictModule`: reads ``com_state`` (``B x 5``, world frame) and
+    ``action`` (``B x A``, the model's action features), writes the predicted ``("next", "com_state")`` (``B x 5``);
+    a model with members (the ensemble) also writes ``("next", "com_state_std")`` (``B x 5``, the spread of the
+    members' predictions, yaw about its circular mean) and ``("next", "com_state_members")`` (``B x M x 5``).
+
+    Example:
+        >>> import torch
+        >>> from tensordict import TensorDict
+        >>> module = com_model_module(CoMDynamicsModel(action_dim=3, hidden=16))
+        >>> td = module(TensorDict({"com_state": torch.zeros(4, 5), "action": torch.zeros(4, 3)}, [4]))
+        >>> td["next", "com_state"].shape
+        torch.Size([4, 5])
+    """
+    from tensordict.nn import TensorDictModule
+
+    def sibling(name):
+        return (*out_key[:-1], name) if isinstance(out_key, tuple) else name
+
+    out_keys = [out_key]
+    if hasattr(model, "predict_members"):
+        out_keys += [sibling("com_state_std"), sibling("com_state_members")]
+    return TensorDictModule(_PredictWithSpread(model), in_keys=[state_key, action_key], out_keys=out_keys)
+
 
 @dataclass
 class TrainedCoMModel:
     """A trained CoM dynamics model and its training report (see :func:`train_com_model`)."""
 
-    model: CoMDynamicsModel
+    model: nn.Module
     metadata: dict
 
+    @property
+    def name(self) -> str:
+        """The model's registry name (``mlp``, ``ensemble``, ...)."""
+        return model_name(self.model)
+
     def save(self, path: str | os.PathLike) -> None:
-        """Writes a checkpoint (config, weights and statistics, metadata) to ``path`` atomically."""
-        save_checkpoint(path, CHECKPOINT_KIND, CHECKPOINT_FORMAT, {"config": self.model.config(),
+        """Writes a checkpoint (the model's registry name, its config, weights and statistics, metadata) to ``path``
+        atomically."""
+        save_checkpoint(path, CHECKPOINT_KIND, CHECKPOINT_FORMAT, {"model": self.name, "config": self.model.config(),
                         "state_dict": self.model.state_dict(), "metadata": self.metadata})
 
     @classmethod
     def load(cls, path: str | os.PathLike, map_location="cpu") -> "TrainedCoMModel":
-        """Reads a checkpoint written by :meth:`save`; raises :class:`ArtifactError` naming the file if it is bad."""
+        """Reads a checkpoint written by :meth:`save` (a checkpoint without a model name is an ``mlp``), building the
+        model from :data:`MODELS`; raises :class:`ArtifactError` naming the file if it is bad."""
         payload = load_checkpoint(path, CHECKPOINT_KIND, CHECKPOINT_FORMAT, map_location)
         try:
-            model = CoMDynamicsModel(**payload["config"])
+            name = payload.get("model", "mlp")
+            if name not in MODELS:
+                raise ValueError(f"unknown dynamics model {name!r} ({', '.join(MODELS.names())})")
+            model = MODELS[name](**payload["config"])
             model.load_state_dict(payload["state_dict"])
         except (KeyError, TypeError, ValueError, RuntimeError) as error:
             raise ArtifactError(f"corrupted CoM model checkpoint {path}: {error}") from error
@@ -256,6 +353,7 @@ def train_com_model(
     action,
     next_com_state,
     *,
+    model: str = "mlp",
     hidden: int = 512,
     lr: float = 1e-3,
     batch_size: int = 512,
@@ -266,14 +364,21 @@ def train_com_model(
     seed: int = 0,
     device: str = "cpu",
     progress: bool = True,
+    **model_options,
 ) -> TrainedCoMModel:
-    """Fits a :class:`CoMDynamicsModel` to M world-frame transitions ``com_state -> next_com_state`` under ``action``.
+    """Fits a CoM dynamics model (by registry name, :data:`MODELS`) to M world-frame transitions
+    ``com_state -> next_com_state`` under ``action``.
 
     Args:
         com_state, next_com_state: ``M x 5`` world-frame states ``(x, y, yaw, vx, vy)`` (m, rad, m/s), NumPy or
             torch.
         action: ``M x A`` actions held over each transition.
-        hidden: width of the 2 hidden layers. lr, batch_size: Adam step size and minibatch size.
+        model: the model's registry name: ``mlp`` (:class:`CoMDynamicsModel`, the paper's; trained exactly as
+            before the registry existed) or ``ensemble``
+            (:class:`~hierloco.components.com_ensemble.CoMEnsembleModel`); ``model_options`` are its other options
+            (``members``, ``head``, ``propagation``, ``member_data`` for the ensemble).
+        hidden: width of the 2 hidden layers. lr, batch_size: Adam step size and minibatch size (per member for an
+            ensemble).
         holdout: fraction of the transitions held out (seeded random split, see :func:`holdout_split`).
         max_epochs: upper bound on the epochs. patience: stop once the held-out loss has not improved for this many
             epochs; the weights of the best epoch are kept.
@@ -289,7 +394,7 @@ def train_com_model(
 
     Raises:
         ValueError: for mismatched lengths, wrong trailing dimensions, NaN/inf, fewer than ``MIN_TRANSITIONS``
-            transitions or a bad hyperparameter, before training starts.
+            transitions, an unknown model or option, or a bad hyperparameter, before training starts.
 
     Example:
         >>> import numpy as np
@@ -301,6 +406,11 @@ def train_com_model(
         (180, 20, 5)
     """
     state, act, next_state = _check_training_inputs(com_state, action, next_com_state, holdout)
+    if model not in MODELS:
+        raise ValueError(f"unknown dynamics model {model!r} (dynamics models: {', '.join(MODELS.names())})")
+    problems = MODELS.check_options(model, {"hidden": hidden, **model_options})
+    if problems:
+        raise ValueError("; ".join(problems))
     for name, value in [("hidden", hidden), ("batch_size", batch_size), ("max_epochs", max_epochs),
                         ("patience", patience)]:
         if int(value) < 1:
@@ -314,10 +424,11 @@ def train_com_model(
     train_idx, heldout_idx = holdout_split(len(inputs), holdout, seed)
     input_mean, input_std = inputs[train_idx].mean(0), _nonzero_std(inputs[train_idx].std(0, correction=0))
     output_mean, output_std = delta[train_idx].mean(0), _nonzero_std(delta[train_idx].std(0, correction=0))
+    name = model
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(seed)
-        model = CoMDynamicsModel(act.shape[1], hidden, input_mean=input_mean, input_std=input_std,
-                                 output_mean=output_mean, output_std=output_std)
+        model = MODELS[name](act.shape[1], hidden=hidden, input_mean=input_mean, input_std=input_std,
+                             output_mean=output_mean, output_std=output_std, **model_options)
     model.to(device)
     generator = torch.Generator().manual_seed(seed)
 
@@ -333,20 +444,21 @@ def train_com_model(
     def heldout_loss() -> float:
         model.eval()
         with torch.no_grad():
-            loss = float(((model.net(heldout_x) - heldout_y) ** 2).mean())
+            loss = model.heldout_loss(heldout_x, heldout_y)
         model.train()
         return loss
 
+    rows = model.training_rows(len(train_x), generator)  # None: every row (the MLP); M x num_train: per member
     history, best_loss, best_epoch = [], math.inf, 0
     best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
     start = time.perf_counter()
     bar = tqdm(range(1, int(max_epochs) + 1), desc="CoM model", disable=not progress)
     model.train()
     for epoch in bar:
-        order = torch.randperm(len(train_x), generator=generator).to(device)
-        for begin in range(0, len(order), batch_size):
-            idx = order[begin:begin + batch_size]
-            loss = ((model.net(train_x[idx]) - train_y[idx]) ** 2).mean()
+        order = model.epoch_order(rows, len(train_x), generator).to(device)
+        for begin in range(0, order.shape[-1], batch_size):
+            idx = order[..., begin:begin + batch_size]
+            loss = model.training_loss(train_x[idx], train_y[idx])
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             optimizer.step()
@@ -376,7 +488,9 @@ def train_com_model(
         "num_train": len(train_idx), "num_heldout": len(heldout_idx), "seed": int(seed),
         "action_dim": int(act.shape[1]), "hidden": int(hidden), "lr": float(lr), "batch_size": int(batch_size),
         "holdout": float(holdout), "max_epochs": int(max_epochs), "patience": int(patience),
-        "duration": float(duration),
+        "duration": float(duration), "model": name,
+        "model_options": {k: v for k, v in model.config().items() if k != "action_dim"},
+        **model.heldout_report(heldout_x.cpu(), heldout_y.cpu()),
     }
     return TrainedCoMModel(model, metadata)
 
@@ -415,5 +529,7 @@ def prediction_errors(model: CoMDynamicsModel, com_states, actions) -> torch.Ten
     return error
 
 
-__all__ = ["CoMDynamicsModel", "TrainedCoMModel", "apply_delta", "holdout_split", "local_transition",
-           "prediction_errors", "train_com_model"]
+__all__ = ["MODELS", "CoMDynamicsModel", "TrainedCoMModel", "apply_delta", "com_model_module", "holdout_split",
+           "local_transition", "model_name", "prediction_errors", "train_com_model"]
+
+import hierloco.components.com_ensemble  # noqa: E402,F401  (registers the ensemble)

@@ -92,8 +92,34 @@ class LatentGaitPolicy(nn.Module):
                 "num_harmonics": self.num_harmonics}
 
     def as_module(self, phase_key="phase", latent_key="latent", out_key="joint_targets") -> TensorDictModule:
-        """This policy as a TensorDict module reading ``phase`` and ``latent``, writing ``joint_targets``."""
+        """This policy as a TensorDict module reading ``phase`` (``B x 1``, t = n / N in (0, 1]) and ``latent``
+        (``B x Z``), writing ``joint_targets`` (``B x J``, rad): one control step."""
         return TensorDictModule(self, in_keys=[phase_key, latent_key], out_keys=[out_key])
+
+    def pattern_module(self, latent_key="latent", out_key="joint_pattern") -> TensorDictModule:
+        """This policy as a TensorDict module reading ``latent`` (``B x Z``) and writing the whole action's
+        ``joint_pattern`` (``B x N x J``, rad; step n at phase n / N), as :meth:`pattern`.
+
+        Example:
+            >>> import torch
+            >>> from tensordict import TensorDict
+            >>> policy = LatentGaitPolicy(num_joints=12, latent_dim=3, hidden=32, steps_per_action=100)
+            >>> td = policy.pattern_module()(TensorDict({"latent": torch.zeros(2, 3)}, [2]))
+            >>> td["joint_pattern"].shape
+            torch.Size([2, 100, 12])
+        """
+        return TensorDictModule(GaitPattern(self), in_keys=[latent_key], out_keys=[out_key])
+
+
+class GaitPattern(nn.Module):
+    """``latent`` ``B x Z`` -> ``joint_targets`` ``B x N x J`` (rad): :meth:`LatentGaitPolicy.pattern` as a module."""
+
+    def __init__(self, policy: LatentGaitPolicy):
+        super().__init__()
+        self.policy = policy
+
+    def forward(self, latent: torch.Tensor) -> torch.Tensor:
+        return self.policy.pattern(latent)
 
 
 @dataclass

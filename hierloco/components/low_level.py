@@ -23,6 +23,8 @@ from __future__ import annotations
 
 import numpy as np
 import torch
+from tensordict.nn import TensorDictModule
+from torch import nn
 
 from hierloco.components.expert_library import ExpertLibrary
 from hierloco.components.experts import RaibertController, run_closed_loop
@@ -30,7 +32,22 @@ from hierloco.components.gait_policy import TrainedGaitPolicy
 from hierloco.envs.low_level import LOW_LEVELS, LowLevel
 from hierloco.envs.robots import RobotSpec, get_robot
 
-__all__ = ["CommandLowLevel", "ExpertReplayLowLevel", "LatentLowLevel", "LowLevel"]
+__all__ = ["CommandLowLevel", "ExpertReplayLowLevel", "LatentJointTargets", "LatentLowLevel", "LowLevel"]
+
+
+class LatentJointTargets(nn.Module):
+    """``latent`` ``B x Z`` and ``phase`` ``B x 1`` (t = n / N in (0, 1]) -> joint targets ``B x J`` (rad): the
+    policy ``pi(t, z)`` with ``z`` clipped to the latent box ``[low, high]``."""
+
+    def __init__(self, policy, low, high):
+        super().__init__()
+        self.policy = policy
+        self.register_buffer("low", torch.as_tensor(low, dtype=torch.float32))
+        self.register_buffer("high", torch.as_tensor(high, dtype=torch.float32))
+
+    def forward(self, latent: torch.Tensor, phase: torch.Tensor) -> torch.Tensor:
+        z = torch.maximum(torch.minimum(latent.to(self.low.dtype), self.high), self.low)
+        return self.policy(phase.to(self.low.dtype), z)
 
 
 @LOW_LEVELS.register("latent")
@@ -51,6 +68,25 @@ class LatentLowLevel(LowLevel):
         self.steps_per_action = self.policy.steps_per_action
         self.action_low = trained.latent_low.numpy().astype(np.float64)
         self.action_high = trained.latent_high.numpy().astype(np.float64)
+
+    def as_module(self, latent_key="latent", phase_key="phase", out_key="action") -> TensorDictModule:
+        """The low level at one control step as a TensorDict module: reads ``latent`` (``B x Z``, clipped to the
+        latent box) and ``phase`` (``B x 1``, t = n / N in (0, 1] for the n-th of the action's N steps), writes the
+        joint targets ``action`` (``B x J``, rad, the robot's joint order): what a 100 Hz env takes
+        (:class:`hierloco.envs.latent_wrapper.LatentActionWrapper` runs it over ``make_env``).
+
+        Example:
+            >>> import torch
+            >>> from tensordict import TensorDict
+            >>> from hierloco.components.gait_policy import train_gait_policy
+            >>> trained = train_gait_policy(np.zeros((2, 100, 12)), hidden=8, epochs=1, progress=False)
+            >>> module = LatentLowLevel(trained, "a1").as_module()
+            >>> td = TensorDict({"latent": torch.zeros(4, 3), "phase": torch.full((4, 1), 0.01)}, [4])
+            >>> module(td)["action"].shape
+            torch.Size([4, 12])
+        """
+        module = LatentJointTargets(self.policy, self.action_low, self.action_high).to(self.device)
+        return TensorDictModule(module, in_keys=[latent_key, phase_key], out_keys=[out_key])
 
     def patterns(self, latents: np.ndarray) -> np.ndarray:
         """``B x Z`` latents -> ``B x N x J`` joint targets (rad)."""

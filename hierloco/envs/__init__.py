@@ -7,6 +7,7 @@ environments).
 
 from hierloco.envs.batched_sim import BatchedSimulator, SimulationResult, available_cores
 from hierloco.envs.latent_env import LatentActionEnv
+from hierloco.envs.latent_wrapper import LatentActionWrapper
 from hierloco.envs.locomotion import (
     LocomotionEnv,
     LocomotionPhysics,
@@ -32,7 +33,7 @@ from hierloco.envs.tasks import (
     s_path,
     task_options,
 )
-from hierloco.envs.torchrl_env import make_env
+from hierloco.envs.torchrl_env import OBSERVATION_KEYS, make_env
 from hierloco.envs.transforms import (
     CoMState,
     ContinueAfterFalls,
@@ -44,10 +45,10 @@ from hierloco.envs.transforms import (
     task_transforms,
 )
 from hierloco.envs.velocity_command_env import VelocityCommandEnv
-from hierloco.envs.world_model import CoMWorldModelEnv
+from hierloco.envs.world_model import RISKS, CoMWorldModelEnv
 
 __all__ = [
-    "TASKS", "Arena", "BatchedSimulator", "CoMState", "CoMWorldModelEnv", "ContinueAfterFalls", "DisableLegs",
+    "OBSERVATION_KEYS", "RISKS", "LatentActionWrapper", "TASKS", "Arena", "BatchedSimulator", "CoMState", "CoMWorldModelEnv", "ContinueAfterFalls", "DisableLegs",
     "GoalObservation", "GoalReaching", "LatentActionEnv", "LocomotionEnv", "LocomotionPhysics", "LocomotionTask",
     "LowLevel", "Obstacle", "RobotSpec", "SimulationResult", "Task", "TaskEpisode", "TaskResult", "TaskReward",
     "TaskTransform", "TrajectoryTracking", "VelocityCommandEnv", "VelocityTracking", "available_cores", "clamp_joint_targets",

@@ -175,6 +175,12 @@ class Task:
         ``step`` (0-based) of ``episode``: the sum of :meth:`cost_terms`; all arguments broadcast together."""
         return self.total_cost(self.cost_terms(com_state, next_com_state, episode, step))
 
+    def __call__(self, com_state, next_com_state, action, info) -> torch.Tensor:
+        """A task is a cost callable of a world model (:class:`hierloco.envs.world_model.CoMWorldModelEnv`, its
+        default cost): :meth:`cost` of the transition at ``info["task_episode"]`` and ``info["task_step"]``; the
+        action is not scored."""
+        return self.cost(com_state, next_com_state, info["task_episode"], info["task_step"])
+
     def reward(self, tensordict: TensorDictBase, state_key="com_state", episode_key="task_episode",
                step_key="task_step") -> torch.Tensor:
         """``-cost`` of the transitions in ``tensordict`` (``state_key`` and ``("next", state_key)``), ``... x 1``."""

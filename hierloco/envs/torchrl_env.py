@@ -11,11 +11,15 @@ from __future__ import annotations
 
 from typing import Sequence
 
-from torchrl.envs import Compose, DoubleToFloat, TransformedEnv
+from torchrl.envs import CatTensors, Compose, DoubleToFloat, TransformedEnv
 
 from hierloco.envs.locomotion import INIT_JOINT_NOISE, LocomotionEnv, make_dm_env
 from hierloco.envs.robots import RobotSpec, get_robot
 from hierloco.envs.transforms import CoMState, DisableLegs
+
+OBSERVATION_KEYS = ("com_position", "com_velocity", "orientation", "joint_positions", "joint_velocities",
+                    "foot_contacts")
+"""The keys :func:`make_env` concatenates, in this order, into its flat ``observation``."""
 
 
 def make_env(
@@ -30,7 +34,11 @@ def make_env(
     """A TorchRL env of ``robot`` (a registered name or a :class:`RobotSpec`) at 100 Hz.
 
     The action is the joint-target vector (rad, ``robot.joint_names`` order); observations are float32 and
-    include ``com_state`` (``x, y, yaw, vx, vy``, world frame) and ``com_velocity_local``. ``disabled_legs`` adds a
+    include ``com_state`` (``x, y, yaw, vx, vy``, world frame) and ``com_velocity_local``, and a flat
+    ``observation`` (``9 + 2 J + L``: J joints, L legs) for policies that take one vector: the concatenation, in this
+    order (:data:`OBSERVATION_KEYS`), of ``com_position`` (3, world, m), ``com_velocity`` (3, world, m/s),
+    ``orientation`` (3, roll/pitch/yaw, rad), ``joint_positions`` (J, rad), ``joint_velocities`` (J, rad/s) and
+    ``foot_contacts`` (L, 1 in contact, 0 not), each also kept under its own key. ``disabled_legs`` adds a
     :class:`DisableLegs` transform. A fall sets ``terminated``, the time limit (s) ``truncated``; the base env is a
     :class:`hierloco.envs.locomotion.LocomotionEnv` (``env.base_env.physics`` is the dm_control Physics).
 
@@ -42,7 +50,8 @@ def make_env(
     robot.leg_joint_indices(disabled_legs)  # names checked before any work
     base = LocomotionEnv(make_dm_env(robot, disabled_legs=disabled_legs, time_limit=time_limit,
                                         init_joint_noise=init_joint_noise), device=device)
-    transforms = [DoubleToFloat(), CoMState()]
+    transforms = [DoubleToFloat(), CoMState(),
+                  CatTensors(list(OBSERVATION_KEYS), out_key="observation", del_keys=False, sort=False)]
     if disabled_legs:
         transforms.append(DisableLegs(robot, disabled_legs))
     env = TransformedEnv(base, Compose(*transforms))

@@ -1,11 +1,28 @@
-"""The learned CoM dynamics as a TorchRL world model (``ModelBasedEnvBase``), scored by a task.
+"""The learned CoM dynamics as a TorchRL world model (``ModelBasedEnvBase``), scored by a cost.
 
 One step of this env is one high-level action: the dynamics model predicts the next world-frame CoM state from
-the current one and the action; the reward is ``-cost`` of the task for that imagined transition at the current
-task step, which the env then advances. It is not batch-locked, so TorchRL planners (and hierloco's) roll it out on
-``B x S`` candidate actions at once.
+the current one and the action; the reward is ``-cost`` of that imagined transition at the current task step, which
+the env then advances. It is not batch-locked, so TorchRL planners (and hierloco's) roll it out on ``B x S``
+candidate actions at once.
 
-State keys: ``com_state`` (``5``, world ``(x, y, yaw, vx, vy)``), ``task_episode`` and ``task_step`` (``1``, int64).
+The cost is any callable ``cost(com_state, next_com_state, action, info) -> ...`` over tensors batched on leading
+dimensions ``...`` (states ``... x 5``, world frame, m, rad, m/s; ``action`` ``... x A``); ``info`` is a dict of
+tensors that broadcast against ``...``: ``task_episode`` and ``task_step`` (int64), and for a model with members (the
+ensemble, :mod:`hierloco.components.com_ensemble`) ``next_com_state_mean`` and ``next_com_state_std`` (``... x 5``:
+the mean and spread of the model's particles after the action). A :class:`~hierloco.envs.tasks.Task` is such a
+callable and is the default cost (``task=``); ``cost=`` replaces it without a subclass.
+
+With a model that carries particles (``model.num_particles``, ``model.predict_particles``: the ensemble), the env
+carries ``P`` particles per state (``com_state_particles``, ``P x 5``) over the horizon and calls the cost on every
+particle (``...`` then ends with ``P``); ``com_state`` is their mean. The reward aggregates the particles' costs by
+``risk``: ``"none"`` (their mean), ``"mean_std"`` (mean + ``beta`` x standard deviation) or ``"pessimistic"`` (the
+worst particle), applied to each particle's cost summed since the state the planner started from
+(``cost_particles``, ``P``): a planner summing the rewards over the horizon scores a plan by the risk of its whole
+cost.
+
+State keys: ``com_state`` (``5``, world ``(x, y, yaw, vx, vy)``), ``task_episode`` and ``task_step`` (``1``, int64),
+which a measured state holds (``measured_keys``: what planners read); with particles also ``com_state_particles``
+and ``cost_particles``, made from ``com_state`` when absent.
 
 Example:
     >>> import torch
@@ -18,69 +35,190 @@ Example:
     >>> td = env.step(td.set("action", torch.tensor([[0.5, 0.0], [0.0, 0.5]])))
     >>> td["next", "com_state"][:, :2].tolist(), td["next", "task_step"].squeeze(-1).tolist()
     ([[0.5, 0.0], [0.0, 0.5]], [1, 1])
+
+    A cost of one's own, here "reach (1, 0) and keep out of a disc of 0.3 m around (0.5, 0)":
+
+    >>> def avoid_disc(com_state, next_com_state, action, info):
+    ...     distance = (next_com_state[..., :2] - torch.tensor([1.0, 0.0])).norm(dim=-1)
+    ...     inside = (0.3 - (next_com_state[..., :2] - torch.tensor([0.5, 0.0])).norm(dim=-1)).clamp_min(0)
+    ...     return distance + 10 * inside
+    >>> env = CoMWorldModelEnv(Drift(), action_low=[-1, -1], action_high=[1, 1], cost=avoid_disc)
+    >>> td = env.step(env.reset().set("action", torch.tensor([0.5, 0.0])))
+    >>> round(-td["next", "reward"].item(), 2)  # 0.5 m from the goal, 0.3 m inside the disc
+    3.5
 """
 
 from __future__ import annotations
 
-from typing import Sequence
+from typing import Callable, Sequence
 
 import torch
 from tensordict import TensorDict, TensorDictBase
-from tensordict.nn import TensorDictModule
+from tensordict.nn import TensorDictModuleBase
 from torch import nn
 from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs.model_based import ModelBasedEnvBase
 
+from hierloco.envs.frames import wrap_angle
 from hierloco.envs.tasks import Task
+
+RISKS = ("none", "mean_std", "pessimistic")
+MEASURED_KEYS = ("com_state", "task_episode", "task_step")
+Cost = Callable[[torch.Tensor, torch.Tensor, torch.Tensor, dict], torch.Tensor]
+
+
+def risk_of(costs: torch.Tensor, risk: str, beta: float) -> torch.Tensor:
+    """``...``: the risk of ``... x P`` particle costs: their mean (``none``), mean + ``beta`` x standard deviation
+    (``mean_std``, population std) or maximum (``pessimistic``)."""
+    if risk == "none":
+        return costs.mean(-1)
+    if risk == "mean_std":
+        return costs.mean(-1) + beta * costs.std(-1, correction=0)
+    if risk == "pessimistic":
+        return costs.amax(-1)
+    raise ValueError(f"risk must be one of {', '.join(RISKS)}, got {risk!r}")
+
+
+def particle_moments(particles: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Mean and standard deviation ``... x 5`` over the particle dimension of ``... x P x 5`` world CoM states.
+
+    The yaw's mean is circular (``atan2`` of the mean sine and cosine) and its spread is that of the yaw differences
+    to it, wrapped to (-pi, pi]; the other dimensions have plain (population) moments.
+    """
+    yaw = particles[..., 2]
+    mean_yaw = torch.atan2(torch.sin(yaw).mean(-1), torch.cos(yaw).mean(-1))
+    planar = particles[..., [0, 1, 3, 4]]
+    centre = planar.mean(-2)
+    spread = (planar - centre.unsqueeze(-2)).pow(2).mean(-2).sqrt()
+    yaw_spread = wrap_angle(yaw - mean_yaw.unsqueeze(-1)).pow(2).mean(-1).sqrt()
+    mean = torch.cat([centre[..., :2], mean_yaw.unsqueeze(-1), centre[..., 2:]], -1)
+    std = torch.cat([spread[..., :2], yaw_spread.unsqueeze(-1), spread[..., 2:]], -1)
+    return mean, std
 
 
 class _CoMStep(nn.Module):
-    """``(com_state, action, task_episode, task_step) -> (next com_state, reward, next task_step)``."""
+    """One imagined action on tensors: the model, the scoring (``cost``, else ``task``), the risk over particles."""
 
-    def __init__(self, model: nn.Module, task: Task | None, action_features=None):
+    def __init__(self, model: nn.Module, task: Task | None, cost: Cost | None, action_features=None, *,
+                 risk: str = "none", beta: float = 1.0, generator: torch.Generator | None = None):
         super().__init__()
         self.model = model
-        self.task = task
+        self.task, self.cost = task, cost
         self.action_features = action_features
+        self.risk, self.beta, self.generator = risk, float(beta), generator
+        self.particles = int(getattr(model, "num_particles", 0)) if hasattr(model, "predict_particles") else 0
+
+    @property
+    def scoring(self) -> Cost | None:
+        return self.cost if self.cost is not None else self.task
 
     def forward(self, com_state, action, episode, step):
-        features = action if self.action_features is None else self.action_features(action)
-        next_state = self.model.predict(com_state, features.to(com_state.dtype))
-        if self.task is None:
-            reward = torch.zeros_like(next_state[..., :1])
-        else:
-            cost = self.task.cost(com_state, next_state, episode.squeeze(-1), step.squeeze(-1))
-            reward = -cost.unsqueeze(-1).to(next_state.dtype)
-        return next_state, reward, step + 1
+        """``... x 5``, ``... x A``, ``... x 1``, ``... x 1`` -> next ``com_state``, ``reward`` ``... x 1``, next
+        ``task_step``."""
+        features = (action if self.action_features is None else self.action_features(action)).to(com_state.dtype)
+        next_state = self.model.predict(com_state, features)
+        if self.scoring is None:
+            return next_state, torch.zeros_like(next_state[..., :1]), step + 1
+        info = {"task_episode": episode.squeeze(-1), "task_step": step.squeeze(-1)}
+        cost = self.scoring(com_state, next_state, action, info)
+        return next_state, -cost.unsqueeze(-1).to(next_state.dtype), step + 1
+
+    def particles_forward(self, com_state, action, episode, step, particles, spent):
+        """As :meth:`forward` with ``P`` particles ``... x P x 5`` and their costs so far ``... x P``; also returns
+        the next particles and their costs."""
+        features = (action if self.action_features is None else self.action_features(action)).to(com_state.dtype)
+        next_particles = self.model.predict_particles(particles, features.unsqueeze(-2), self.generator)
+        next_state, spread = particle_moments(next_particles)
+        total = spent
+        if self.scoring is not None:
+            info = {"task_episode": episode, "task_step": step, "next_com_state_mean": next_state.unsqueeze(-2),
+                    "next_com_state_std": spread.unsqueeze(-2)}
+            total = spent + self.scoring(particles, next_particles, action.unsqueeze(-2), info).to(spent.dtype)
+        reward = -(risk_of(total, self.risk, self.beta) - risk_of(spent, self.risk, self.beta)).unsqueeze(-1)
+        return next_state, reward, step + 1, next_particles, total
+
+
+class _StepModule(TensorDictModuleBase):
+    """:class:`_CoMStep` on TensorDicts; the particle keys are made from ``com_state`` when a state lacks them."""
+
+    def __init__(self, module: _CoMStep):
+        super().__init__()
+        self.module = module
+        self.in_keys = ["com_state", "action", "task_episode", "task_step"]
+        self.out_keys = ["com_state", "reward", "task_step"]
+        if module.particles:
+            self.in_keys += ["com_state_particles", "cost_particles"]
+            self.out_keys += ["com_state_particles", "cost_particles"]
+
+    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        inputs = [tensordict.get(key) for key in ("com_state", "action", "task_episode", "task_step")]
+        if not self.module.particles:
+            return tensordict.update(dict(zip(self.out_keys, self.module(*inputs))))
+        com_state = inputs[0]
+        count, batch = self.module.particles, com_state.shape[:-1]
+        particles = tensordict.get("com_state_particles", None)
+        if particles is None:
+            particles = com_state.unsqueeze(-2).expand(*batch, count, 5)
+        spent = tensordict.get("cost_particles", None)
+        if spent is None:
+            spent = torch.zeros(*batch, count, dtype=com_state.dtype, device=com_state.device)
+        return tensordict.update(dict(zip(self.out_keys, self.module.particles_forward(*inputs, particles, spent))))
+
+
+def _check_risk(model: nn.Module, risk: str, beta: float) -> None:
+    if risk not in RISKS:
+        raise ValueError(f"risk must be one of {', '.join(RISKS)}, got {risk!r}")
+    if isinstance(beta, bool) or not isinstance(beta, (int, float)) or beta != beta or abs(beta) == float("inf"):
+        raise ValueError(f"beta must be a finite number, got {beta!r}")
+    if risk != "none" and not hasattr(model, "predict_particles"):
+        raise ValueError(f"risk {risk!r} needs a model with members (e.g. the ensemble); {type(model).__name__} "
+                         "predicts one state")
 
 
 class CoMWorldModelEnv(ModelBasedEnvBase):
     """A world model env over a learned CoM dynamics model (anything with ``predict(com_state, action)``).
 
     Args:
-        model: the dynamics model, e.g. :class:`hierloco.components.com_model.CoMDynamicsModel`.
+        model: the dynamics model, e.g. :class:`hierloco.components.com_model.CoMDynamicsModel` or the ensemble
+            :class:`hierloco.components.com_ensemble.CoMEnsembleModel` (then particles, see the module doc).
         action_low, action_high: the action box (``A``); with ``num_choices`` the action is an index in
             ``[0, num_choices)`` (LIB's experts), passed to the model as a float.
-        task: scores transitions (reward ``-cost``); ``None`` gives zero reward.
+        task: the task: its episodes' start state and, unless ``cost`` is given, the cost (reward ``-cost``);
+            ``None`` with no ``cost`` gives zero reward.
+        cost: a cost callable ``(com_state, next_com_state, action, info) -> ...`` (see the module doc) used instead
+            of the task's.
         action_features: maps actions to the model's input features (e.g. expert indices to one-hot vectors,
             :meth:`hierloco.components.low_level.LowLevel.action_features`); default: the actions themselves.
+        risk: ``"none"``, ``"mean_std"`` or ``"pessimistic"``: how the particles' costs make the reward (a model with
+            particles only). beta: the weight of the standard deviation in ``mean_std``.
+        seed: seeds the draws of a model that samples its particles (trajectory sampling, moment matching).
     """
 
     def __init__(self, model: nn.Module, *, action_low: Sequence[float] | None = None,
                  action_high: Sequence[float] | None = None, num_choices: int | None = None,
-                 task: Task | None = None, action_features=None, device: str = "cpu"):
-        step = TensorDictModule(_CoMStep(model, task, action_features),
-                                in_keys=["com_state", "action", "task_episode", "task_step"],
-                                out_keys=["com_state", "reward", "task_step"])
-        super().__init__(step, device=device)
+                 task: Task | None = None, action_features=None, device: str = "cpu", cost: Cost | None = None,
+                 risk: str = "none", beta: float = 1.0, seed: int = 0):
+        _check_risk(model, risk, beta)
+        if cost is not None and not callable(cost):
+            raise ValueError(f"cost must be a callable (com_state, next_com_state, action, info), got {cost!r}")
+        self.generator = torch.Generator(device=device).manual_seed(int(seed))
+        step = _CoMStep(model, task, cost, action_features, risk=risk, beta=beta, generator=self.generator)
+        super().__init__(_StepModule(step), device=device)
         self.model = model
         self.task = task
-        self.observation_spec = Composite(
+        self.cost = cost
+        self.risk, self.beta = risk, float(beta)
+        self.num_particles = step.particles
+        self.measured_keys = list(MEASURED_KEYS)
+        observation = dict(
             com_state=Unbounded((5,), device=self.device),
             task_episode=Unbounded((1,), dtype=torch.int64, device=self.device),
             task_step=Unbounded((1,), dtype=torch.int64, device=self.device),
-            device=self.device,
         )
+        if self.num_particles:
+            observation["com_state_particles"] = Unbounded((self.num_particles, 5), device=self.device)
+            observation["cost_particles"] = Unbounded((self.num_particles,), device=self.device)
+        self.observation_spec = Composite(observation, device=self.device)
         if num_choices is not None:
             if int(num_choices) < 1:
                 raise ValueError(f"num_choices must be at least 1, got {num_choices}")
@@ -96,9 +234,24 @@ class CoMWorldModelEnv(ModelBasedEnvBase):
         self.reward_spec = Unbounded((1,), device=self.device)
 
     def set_task(self, task: Task | None) -> None:
-        """Scores with ``task`` from now on (the model is kept)."""
+        """Pursues ``task`` from now on (the model is kept): its cost scores transitions unless a ``cost`` was
+        given (:meth:`set_cost`)."""
         self.task = task
         self.world_model.module.task = task
+
+    def set_cost(self, cost: Cost | None) -> None:
+        """Scores transitions with ``cost`` from now on (``None``: the task's cost again)."""
+        if cost is not None and not callable(cost):
+            raise ValueError(f"cost must be a callable (com_state, next_com_state, action, info), got {cost!r}")
+        self.cost = cost
+        self.world_model.module.cost = cost
+
+    def set_risk(self, risk: str = "none", beta: float = 1.0) -> None:
+        """Aggregates the particles' costs by ``risk`` (``none``, ``mean_std`` with ``beta``, ``pessimistic``) from
+        now on."""
+        _check_risk(self.model, risk, beta)
+        self.risk, self.beta = risk, float(beta)
+        self.world_model.module.risk, self.world_model.module.beta = risk, float(beta)
 
     def initial_state(self, com_state: torch.Tensor | None = None, episode=0, step=0) -> TensorDict:
         """A state TensorDict: ``com_state`` (default: the task's start) at ``task_episode``/``task_step``."""
@@ -109,15 +262,20 @@ class CoMWorldModelEnv(ModelBasedEnvBase):
             com_state = start.to(self.device).expand(*torch.broadcast_shapes(episode.shape, step.shape), 5)
         com_state = torch.as_tensor(com_state, dtype=torch.float32, device=self.device)
         batch = com_state.shape[:-1]
-        return TensorDict({"com_state": com_state, "task_episode": episode.expand(batch).unsqueeze(-1).clone(),
-                           "task_step": step.expand(batch).unsqueeze(-1).clone()}, batch_size=batch,
-                          device=self.device)
+        state = {"com_state": com_state, "task_episode": episode.expand(batch).unsqueeze(-1).clone(),
+                 "task_step": step.expand(batch).unsqueeze(-1).clone()}
+        if self.num_particles:
+            state["com_state_particles"] = com_state.unsqueeze(-2).expand(*batch, self.num_particles, 5).clone()
+            state["cost_particles"] = torch.zeros(*batch, self.num_particles, device=self.device)
+        return TensorDict(state, batch_size=batch, device=self.device)
 
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
         if tensordict is not None and "com_state" in tensordict.keys():
             out = tensordict.select("com_state", "task_episode", "task_step", strict=False).clone()
             if "task_episode" not in out.keys():
                 out.update(self.initial_state(out["com_state"]).exclude("com_state"))
+            if self.num_particles:  # a measured state: every particle starts there, nothing spent yet
+                out.update(self.initial_state(out["com_state"]).select("com_state_particles", "cost_particles"))
             return out
         batch = tensordict.batch_size if tensordict is not None else torch.Size([])
         return self.initial_state(episode=torch.zeros(batch, dtype=torch.int64))

@@ -5,6 +5,13 @@ sequences and calls :meth:`BoxPlannerBase.score`, which rolls them out on the (n
 sums the rewards over the horizon (Li et al., RA-L 2021, Sec. III-A.2, Eq. 1). Every planner is a
 :class:`hierloco.components.policies.TaskPolicy`: :meth:`BoxPlannerBase.begin_task` re-targets the world model to a
 task and forgets the warm start.
+
+Warm starts are kept per batch row (per robot): a row starts from its own previous plan only while its episode goes
+on. A call to the planner (``planner(tensordict)``, as ``env.rollout`` and TorchRL collectors make it) reads, when
+present, ``is_init`` (TorchRL's :class:`~torchrl.envs.transforms.InitTracker`: true on the first step of an
+episode), ``_reset``, the task step counter ``task_step`` (a row whose counter went back has started a new episode)
+and ``task_episode`` (a row pursuing another target set); a row flagged by any of them starts cold, the others keep
+their warm start. So a robot reset by a collector never inherits its previous episode's plan, nor another robot's.
 """
 
 from __future__ import annotations
@@ -19,11 +26,16 @@ from hierloco.registry import Registry
 
 # The planners by name (``planner.name``): a new planner is one subclass of :class:`BoxPlannerBase` decorated with
 # ``@PLANNERS.register("name")``; its options are its constructor's keyword arguments (``docs/extending.md``).
-PLANNERS = Registry("planner", context=("env", "planning_horizon", "seed", "choices"))
+PLANNERS = Registry("planner", context=("env", "planning_horizon", "seed", "choices", "init_key", "step_key",
+                                             "episode_key"))
 
 
 class BoxPlannerBase(MPCPlannerBase, TaskPolicy):
     """MPC over a box (or finite set) of actions with a learned world model.
+
+    A TensorDict module: it reads the world model's state keys (``in_keys``: ``com_state`` ``B x 5``,
+    ``task_episode`` and ``task_step`` ``B x 1`` for :class:`~hierloco.envs.world_model.CoMWorldModelEnv`) and writes
+    ``action`` (``B x A``); ``B`` may be absent (one state).
 
     Args:
         env: a world model env, e.g. :class:`hierloco.envs.world_model.CoMWorldModelEnv` (to plan a task with
@@ -31,12 +43,20 @@ class BoxPlannerBase(MPCPlannerBase, TaskPolicy):
         planning_horizon: H, high-level actions looked ahead.
         num_candidates: S, action sequences scored per call and per robot.
         seed: seeds the planner's own random generator.
+        init_key, step_key, episode_key: the keys that say a row's episode has (re)started (see the module doc).
+
+    Attributes:
+        warm_rows: ``B`` bool, the rows whose last plan started from their previous plan (``None`` before a call).
     """
 
     ACTION_SPACES = ("box",)  # what it plans over: "box" (a continuous box), "finite" (a set of choices)
 
-    def __init__(self, env, planning_horizon: int = 1, num_candidates: int = 8000, seed: int = 0):
+    def __init__(self, env, planning_horizon: int = 1, num_candidates: int = 8000, seed: int = 0, *,
+                 init_key: str = "is_init", step_key: str = "task_step", episode_key: str = "task_episode"):
         super().__init__(env)
+        measured = getattr(env, "measured_keys", None)
+        if measured is not None:  # what a measured state holds (a world model may carry more, e.g. particles)
+            self.in_keys = list(measured)
         if int(planning_horizon) < 1 or int(num_candidates) < 1:
             raise ValueError(f"need planning_horizon >= 1 and num_candidates >= 1, got {planning_horizon}, "
                              f"{num_candidates}")
@@ -51,14 +71,57 @@ class BoxPlannerBase(MPCPlannerBase, TaskPolicy):
             self.register_buffer("high", env.action_spec.space.high.clone().float())
         self.generator = torch.Generator(device=self.low.device).manual_seed(seed)
         self._previous = None  # B x H x A, the last plan (for warm starts)
+        self.init_key, self.step_key, self.episode_key = init_key, step_key, episode_key
+        self._marks: dict[str, torch.Tensor] = {}  # B, the step and episode of each row's last plan
+        self._keep = None  # B bool while a call plans: the rows whose warm start is still theirs
+        self.warm_rows = None
 
     @property
     def action_dim(self) -> int:
         return self.low.shape[-1]
 
     def reset(self) -> None:
-        """Forgets the previous plan (call between episodes)."""
+        """Forgets the previous plan of every row (a row whose episode restarts is forgotten on its own)."""
         self._previous = None
+        self._marks = {}
+
+    def forward(self, tensordict: TensorDictBase, tensordict_out: TensorDictBase | None = None,
+                **kwargs) -> TensorDictBase:
+        """Plans from the states in ``tensordict`` and writes ``action``; each row keeps its warm start only while
+        its episode goes on (see the module doc)."""
+        td = self._flat(tensordict)
+        self._keep = self.continuing_rows(td)
+        self.warm_rows = torch.zeros_like(self._keep)  # planners without warm starts leave it so
+        try:
+            out = super().forward(tensordict, tensordict_out, **kwargs)
+        finally:
+            self._keep = None
+        self._marks = {key: td.get(key).reshape(td.batch_size[0], -1)[:, 0].clone()
+                       for key in (self.step_key, self.episode_key) if key in td.keys()}
+        return out
+
+    def continuing_rows(self, tensordict: TensorDictBase) -> torch.Tensor:
+        """``B`` bool: the rows of a ``B``-batch of states that go on with the episode of their previous plan.
+
+        False for every row when there is no previous plan of that batch size; else false where ``is_init`` or
+        ``_reset`` is set, where the step counter is below the one of the row's last plan, or where the episode
+        index changed.
+        """
+        batch = tensordict.batch_size[0]
+        device = self.low.device
+        if self._previous is None or self._previous.shape[0] != batch:
+            return torch.zeros(batch, dtype=torch.bool, device=device)
+        keep = torch.ones(batch, dtype=torch.bool, device=device)
+        keys = tensordict.keys()
+        for flag in (self.init_key, "_reset"):
+            if flag in keys:
+                keep &= ~tensordict.get(flag).reshape(batch, -1).any(-1).to(device)
+        for key, started_over in ((self.step_key, torch.lt), (self.episode_key, torch.ne)):
+            previous = self._marks.get(key)
+            if key in keys and previous is not None:
+                now = tensordict.get(key).reshape(batch, -1)[:, 0]
+                keep &= ~started_over(now, previous).to(device)
+        return keep
 
     def begin_task(self, task) -> None:
         """Scores plans with ``task``'s cost from now on (the world model's ``set_task``) and forgets the previous
@@ -92,11 +155,16 @@ class BoxPlannerBase(MPCPlannerBase, TaskPolicy):
         return total
 
     def initial_mean(self, batch: int) -> torch.Tensor:
-        """``batch x H x A``: the warm start when there is one, else the centre of the box."""
-        mean = self.warm_start(batch)
-        if mean is None:
-            mean = ((self.low + self.high) / 2).expand(batch, self.planning_horizon, -1)
-        return mean
+        """``batch x H x A``: per row, its warm start while its episode goes on (:meth:`continuing_rows`), else the
+        centre of the box. Sets :attr:`warm_rows`."""
+        centre = ((self.low + self.high) / 2).expand(batch, self.planning_horizon, -1)
+        warm = self.warm_start(batch)
+        if warm is None:
+            self.warm_rows = torch.zeros(batch, dtype=torch.bool, device=centre.device)
+            return centre
+        keep = self._keep if self._keep is not None else torch.ones(batch, dtype=torch.bool, device=centre.device)
+        self.warm_rows = keep.clone()
+        return torch.where(keep[:, None, None], warm, centre)
 
     def warm_start(self, batch: int) -> torch.Tensor | None:
         """The previous plan shifted by one action (its last action repeated), ``batch x H x A``, or ``None``."""
