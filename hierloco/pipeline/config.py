@@ -218,8 +218,23 @@ def check_policy(c: Checker) -> None:
         c.fail(f"policy.latent_dim must be 2, 3 or 4 (1 also works), got {dim!r}")
 
 
+DYNAMICS_KEYS = ("num_transitions", "num_robots", "episode_length", "hidden", "lr", "batch_size", "holdout",
+                 "patience", "max_epochs", "model")
+
+
 def check_dynamics(c: Checker) -> None:
-    from hierloco.components.com_model import MIN_TRANSITIONS
+    from hierloco.components.com_model import MIN_TRANSITIONS, MODELS
+
+    name = get(c.cfg, "dynamics.model", "mlp")
+    if name not in MODELS and not (isinstance(name, str) and ":" in name):
+        c.fail(f"unknown dynamics model {name!r} (dynamics.model: choose from {', '.join(MODELS.names())})")
+    else:
+        try:
+            own = {k: v for k, v in section(c.cfg, "dynamics").items() if k not in DYNAMICS_KEYS}
+            for problem in MODELS.check_options(name, own):
+                c.fail(f"dynamics: {problem}")
+        except ValueError as error:
+            c.fail(f"dynamics: {error}")
 
     c.integer("dynamics.num_transitions", minimum=MIN_TRANSITIONS)
     for key in ("dynamics.num_robots", "dynamics.episode_length", "dynamics.hidden", "dynamics.batch_size",
@@ -250,6 +265,16 @@ def check_planner(c: Checker, action_space: str = "box") -> None:
     c.integer("planner.horizon")
     for problem in check_planner_options(name, section(c.cfg, "planner"), action_space=action_space):
         c.fail(problem)
+    from hierloco.envs.world_model import RISKS
+
+    risk = get(c.cfg, "planner.risk", "none")
+    if risk not in RISKS:
+        c.fail(f"unknown risk {risk!r} (planner.risk: choose from {', '.join(RISKS)})")
+    elif risk != "none" and get(c.cfg, "dynamics.model", "mlp") == "mlp":
+        c.fail(f"planner.risk={risk} weighs the disagreement of a model's members: it needs dynamics.model=ensemble")
+    beta = get(c.cfg, "planner.beta", 1.0)
+    if not (_is_number(beta) and beta >= 0):
+        c.fail(f"planner.beta must be a number >= 0, got {beta!r}")
 
 
 def check_eval(c: Checker) -> dict:

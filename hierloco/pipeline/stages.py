@@ -153,10 +153,24 @@ def build_dynamics_data(run, params, make_low_level) -> TransitionData:
         env.close()
 
 
-def dynamics_model_stage(cfg, data: Stage, setting: str) -> Stage:
+def model_params(cfg) -> dict:
+    """The dynamics model's options as a stage key holds them: the training keys it always held
+    (:data:`MODEL_KEYS`), then ``model`` and that model's own options only where they differ from the defaults
+    (the registry's ``mlp``: so runs and records made before the registry keep their keys)."""
+    from hierloco.components.com_model import MODELS
+    from hierloco.registry import without_defaults
+
     d = section(cfg, "dynamics")
+    name = d.get("model", "mlp")
+    own = {key: value for key, value in MODELS.select(name, d).items() if key not in MODEL_KEYS}
+    defaults = {"model": "mlp", **{key: value for key, value in MODELS.options(name).items()
+                                   if key not in MODEL_KEYS}}
+    return {**{k: d[k] for k in MODEL_KEYS}, **without_defaults({"model": name, **own}, defaults)}
+
+
+def dynamics_model_stage(cfg, data: Stage, setting: str) -> Stage:
     params = {"seed": cfg.seed, "device": cfg.device, "duration": cfg.steps_per_action * CONTROL_TIMESTEP,
-              **{k: d[k] for k in MODEL_KEYS}}
+              **model_params(cfg)}
     return Stage(f"dynamics_model_{setting}", params, {"data": data.digest}, f"dynamics_model_{setting}.pt",
                  TrainedCoMModel, build_dynamics_model)
 
@@ -185,6 +199,7 @@ def evaluation_stage(cfg, name: str, spec: dict, setting: str, model: Stage, low
 # The planner options every evaluation key has always held; any other option enters the key only when it differs from
 # its default, so adding an option keeps the keys of finished runs and committed records (docs/pipeline.md).
 PLANNER_KEYS = ("name", "horizon", "num_candidates", "optim_steps", "top_k", "temperature")
+WORLD_MODEL_DEFAULTS = {"risk": "none", "beta": 1.0}  # how the world model scores a plan (planner.risk, .beta)
 
 
 def planner_params(cfg) -> dict:
@@ -193,7 +208,8 @@ def planner_params(cfg) -> dict:
     from hierloco.registry import without_defaults
 
     values = section(cfg, "planner")
-    return without_defaults(values, PLANNERS.options(values["name"]), keep=PLANNER_KEYS)
+    defaults = {**PLANNERS.options(values["name"]), **WORLD_MODEL_DEFAULTS}
+    return without_defaults(values, defaults, keep=PLANNER_KEYS)
 
 
 def build_evaluation(run, params, make_low_level, model: TrainedCoMModel) -> TaskEvaluation:
@@ -213,6 +229,8 @@ def evaluation_rollout(robot, params: dict, task, low_level, model: TrainedCoMMo
     from hierloco.components.planners import make_planner
 
     world_model = make_world_model(model.model, low_level, device=params["device"])
+    planner_section = params["planner"]
+    world_model.set_risk(planner_section.get("risk", "none"), planner_section.get("beta", 1.0))
     planner = make_planner(world_model, seed=params["seed"], **params["planner"])
     locked, limp = fault_legs(robot, params["setting"])
     env = LatentActionEnv(low_level, num_robots=task.num_episodes, disabled_legs=locked, limp_legs=limp,

@@ -104,7 +104,7 @@ def test_the_right_stages_change():
     assert changed_stages("lat", "dynamics.num_robots", 21) == {"dynamics_data_normal", "dynamics_model_normal",
                                                                  *evaluations}
     assert changed_stages("lat", "planner.num_candidates", 600) == evaluations
-    assert changed_stages("lat", "eval.tasks.goal_reaching.num_steps", 4) == {"evaluation_normal_goal_reaching"}
+    assert changed_stages("lat", "eval.tasks.goal_reaching.num_steps", 5) == {"evaluation_normal_goal_reaching"}
     # the IK key once omitted the seed: a seed-1 run reused a seed-0 run's every stage
     ik = {"dynamics_data_normal", "dynamics_model_normal", *evaluations}
     assert changed_stages("ik", "seed", 1) == ik

@@ -19,7 +19,7 @@ MISTAKES = [
     ("settings=norml", "unknown setting 'norml'"),
     ("+eval.tasks.goal_reaching.radus=2", "unknown option 'radus'; valid options: radius"),
     ("+eval.tasks.velocity_tracking.velocities=fast", "eval task 'velocity_tracking'"),
-    ("+eval.tasks.goal_reaching.radius=nan", "radius must be a finite number, got nan"),
+    ("eval.tasks.goal_reaching.radius=nan", "radius must be a finite number, got nan"),
     ("dynamics.num_transitions=5", "dynamics.num_transitions must be an integer >= 10"),
     ("planner.name=magic", "unknown planner 'magic'"),
     ("policy.latent_dim=7", "policy.latent_dim must be 2, 3 or 4"),
@@ -106,3 +106,18 @@ def test_lib_and_sac_own_checks(tmp_path, monkeypatch):
     code, stderr = run_in_process("ik", "preset=tiny", "+controller.gain=3")
     assert code == 2 and "controller has no option 'gain'" in stderr
     assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("overrides, message", [
+    (("dynamics.model=gp",), "unknown dynamics model 'gp' (dynamics.model: choose from ensemble, mlp)"),
+    (("dynamics.model=ensemble", "+dynamics.members=many"), "option members='many' should be like its default 5"),
+    (("+dynamics.memberz=3",), "dynamics_model 'mlp' has no option 'memberz' (its options: hidden)"),
+    (("planner.risk=mean_std",), "planner.risk=mean_std weighs the disagreement of a model's members: it needs "
+                                 "dynamics.model=ensemble"),
+    (("planner.risk=cautious",), "unknown risk 'cautious'"),
+])
+def test_model_and_risk_mistakes_are_one_line(tmp_path, monkeypatch, overrides, message):
+    monkeypatch.chdir(tmp_path)
+    code, stderr = run_in_process("lat", "preset=tiny", f"run_dir={tmp_path / 'run'}", *overrides)
+    assert code == 2 and stderr.startswith("error: ") and message in stderr and len(stderr.splitlines()) == 1, stderr
+    assert not (tmp_path / "run").exists()

@@ -21,7 +21,8 @@ from hierloco.components.planners.exhaustive import ExhaustivePlanner
 from hierloco.components.planners.mppi import BoxMPPIPlanner
 from hierloco.components.planners.random_shooting import RandomShootingPlanner
 
-COMMON = ("name", "horizon")  # keys of a planner section that are not any one planner's options
+COMMON = ("name", "horizon", "risk", "beta")  # keys of a planner section that are no planner's own options (risk and
+# beta tell the world model how to score a plan under a model with members: hierloco.envs.world_model)
 
 
 def make_planner(world_model, *, name: str = "random_shooting", horizon: int = 1, seed: int = 0, **options):
