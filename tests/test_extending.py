@@ -1,60 +1,90 @@
-"""Extension points from user code (``docs/extending.md``): a planner and a task type registered in this test module
-are used by the recipes' command line with nothing else changed; an option added at its default keeps the keys of a
-recorded job."""
+"""Extension points from user code: the four worked examples of ``docs/extending.md`` run as written (each under 40
+lines), a planner and a task type from user modules are used by the recipes' command line with nothing else
+changed, and an option added at its default keeps the keys of a recorded job."""
 
+import contextlib
+import importlib
+import io
+import re
+import sys
 from pathlib import Path
 
 import pytest
 import torch
 
-from hierloco.components.planners import PLANNERS, BoxPlannerBase, RandomShootingPlanner
-from hierloco.envs.tasks import TASKS, Task
+from hierloco.components.planners import PLANNERS, RandomShootingPlanner
+from tests.runner import run_in_process, run_subprocess
 
 ROOT = Path(__file__).resolve().parents[1]
+DOC = ROOT / "docs" / "extending.md"
 
 
-# ---------------------------------------------------------------------------------------------- a new planner
-@PLANNERS.register("grid")
-class GridPlanner(BoxPlannerBase):
-    """Scores a regular grid of first actions, ``points_per_axis`` per axis of the action box (horizon 1)."""
-
-    def __init__(self, env, planning_horizon: int = 1, seed: int = 0, *, points_per_axis: int = 11):
-        super().__init__(env, planning_horizon, num_candidates=1, seed=seed)
-        axes = [torch.linspace(lo, hi, points_per_axis) for lo, hi in zip(self.low.tolist(), self.high.tolist())]
-        self.grid = torch.cartesian_prod(*axes).reshape(-1, self.action_dim)
-
-    @torch.no_grad()
-    def planning(self, tensordict):
-        td = self._flat(tensordict)
-        candidates = self.grid[None, :, None].expand(td.batch_size[0], -1, self.planning_horizon, -1)
-        best = self.score(td, candidates).argmax(1)
-        return self._output(tensordict, self.grid[best])
+def blocks(language: str) -> list[str]:
+    """The ``language`` code blocks of docs/extending.md, in order."""
+    return re.findall(rf"```{language}\n(.*?)```", DOC.read_text(), flags=re.S)
 
 
-# ---------------------------------------------------------------------------------------------- a new task type
-@TASKS.register("patrol")
-class Patrol(Task):
-    """Visit ``waypoints`` (world frame, m) in turn, ``steps_per_waypoint`` task steps each."""
-
-    kind = "patrol"
-
-    def __init__(self, waypoints=((0.4, 0.0), (0.4, 0.4), (0.0, 0.4)), steps_per_waypoint: int = 2, name=None):
-        super().__init__(name)
-        self.waypoints = torch.as_tensor(waypoints, dtype=torch.float32)
-        self.steps_per_waypoint = int(steps_per_waypoint)
-        self.num_steps = len(self.waypoints) * self.steps_per_waypoint
-
-    def target(self, episode, step):
-        return self.waypoints[(step // self.steps_per_waypoint).clamp(max=len(self.waypoints) - 1)]
-
-    def tracking_error(self, state, next_state, target):
-        return (next_state[..., :2] - target).norm(dim=-1)
-
-    def markers(self, episode=None):
-        return self.waypoints.numpy()
+def run_example(code: str, run_dir: Path) -> str:
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        exec(compile(code.replace("RUN_DIR", repr(str(run_dir))), str(DOC), "exec"), {"__name__": "example"})
+    return out.getvalue()
 
 
-def test_a_registered_planner_is_built_from_a_config_section_and_finds_the_optimum():
+@pytest.fixture(scope="module")
+def user_modules(tmp_path_factory):
+    """``my_tasks.py`` and ``my_planners.py`` of the doc, written to a folder on ``sys.path`` and imported."""
+    folder = tmp_path_factory.mktemp("user")
+    task_code, planner_code = blocks("python")[2:4]
+    (folder / "my_tasks.py").write_text(task_code)
+    (folder / "my_planners.py").write_text(planner_code)
+    sys.path.insert(0, str(folder))
+    modules = importlib.import_module("my_tasks"), importlib.import_module("my_planners")
+    yield folder, modules
+    sys.path.remove(str(folder))
+
+
+def test_the_doc_has_four_examples_each_under_40_lines():
+    python = blocks("python")
+    assert len(python) == 4 and len(blocks("bash")) == 2
+    assert all(len([line for line in code.splitlines() if line.strip()]) < 40 for code in python)
+
+
+def test_example_1_an_ensemble_from_code_plans_the_robot_to_its_goals(copy_run):
+    printed = run_example(blocks("python")[0], copy_run)
+    cost, goals = re.search(r"cost ([\d.]+), goals (\d+)%", printed).groups()
+    assert float(cost) < 0.9 and int(goals) >= 50, printed
+
+
+def test_example_2_a_custom_cost_keeps_the_robot_out_of_the_disc(copy_run):
+    code = blocks("python")[1]
+    closest = lambda printed: float(re.search(r"centre: ([\d.]+) m", printed).group(1))  # noqa: E731
+    assert closest(run_example(code, copy_run)) >= 0.2  # the disc's radius
+    assert closest(run_example(code.replace("+ 50 * inside", "+ 0 * inside"), copy_run)) < 0.2  # it is in the way
+
+
+def test_example_3_a_task_type_from_a_user_module_runs_from_the_command_line(copy_run, user_modules):
+    folder, _ = user_modules
+    command = blocks("bash")[0].replace("RUN_DIR", str(copy_run))
+    arguments = [a.strip("'") for a in re.findall(r"'[^']*'|\S+", command.replace("\\\n", " "))]
+    result = run_subprocess("evaluate.py", *arguments[3:], "eval.videos=[]", cwd=folder,
+                            env={"PYTHONPATH": f"{ROOT}:{folder}"})
+    assert result.returncode == 0, result.stderr[-3000:]
+    table = (copy_run / "evaluations" / "patrol" / "results.md").read_text()
+    assert "| lat | a1 | normal | patrol |" in table
+
+
+def test_example_4_a_planner_from_a_user_module_runs_from_the_command_line(copy_run, user_modules):
+    folder, _ = user_modules
+    command = blocks("bash")[1].replace("RUN_DIR", str(copy_run))
+    arguments = re.findall(r"\S+", command.replace("\\\n", " "))
+    result = run_subprocess("evaluate.py", *arguments[3:], "eval.videos=[]", cwd=folder,
+                            env={"PYTHONPATH": f"{ROOT}:{folder}"})
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert (copy_run / "evaluations" / "grid" / "results.csv").is_file()
+
+
+def test_a_user_planner_finds_the_known_optimum_and_checks_its_options(user_modules):
     from hierloco.components.planners import check_planner_options, make_planner
     from hierloco.envs.tasks import GoalReaching
     from hierloco.envs.world_model import CoMWorldModelEnv
@@ -67,31 +97,12 @@ def test_a_registered_planner_is_built_from_a_config_section_and_finds_the_optim
     section = {"name": "grid", "horizon": 1, "num_candidates": 8000, "points_per_axis": 11}  # one section, all
     assert check_planner_options("grid", section) == []
     assert PLANNERS.options("grid") == {"points_per_axis": 11}
-    planner = make_planner(env, **section)
-    action = planner(env.initial_state(episode=torch.tensor([0, 2])))["action"]  # goals at (2, 0) and (0, 2)
-    assert torch.allclose(action, torch.tensor([[0.5, 0.0], [0.0, 0.5]]))
+    action = make_planner(env, **section)(env.initial_state(episode=torch.tensor([0, 2])))["action"]
+    assert torch.allclose(action, torch.tensor([[0.5, 0.0], [0.0, 0.5]]))  # goals at (2, 0) and (0, 2)
     assert check_planner_options("grid", {**section, "points_per_axis": "many"})  # a value unlike its default
 
 
-def test_a_registered_planner_and_task_type_run_from_the_command_line(copy_run):
-    """``planner.name=grid`` and a task of type ``patrol``, on a trained run, from ``evaluate.py``: the test module
-    is the only file that knows them."""
-    from tests.runner import run_in_process
-
-    result = run_in_process("evaluate.py", f"run_dir={copy_run}", "name=grid", "planner.name=grid",
-                            "+planner.points_per_axis=7", "+eval.tasks.patrol={task: patrol, steps_per_waypoint: 2}",
-                            "eval.videos=[]")
-    assert result.returncode == 0, result.stderr[-3000:]
-    table = (copy_run / "evaluations" / "grid" / "results.md").read_text()
-    assert "| lat | a1 | normal | patrol |" in table
-    by_reference = run_in_process("evaluate.py", f"run_dir={copy_run}", "name=ref",
-                                  "+eval.tasks.patrol={task: 'tests.test_extending:Patrol'}", "eval.videos=[]")
-    assert by_reference.returncode == 0, by_reference.stderr[-3000:]
-
-
-def test_an_unknown_planner_option_is_named_with_the_valid_ones(copy_run):
-    from tests.runner import run_in_process
-
+def test_an_unknown_option_of_a_user_planner_is_named_with_the_valid_ones(copy_run, user_modules):
     result = run_in_process("evaluate.py", f"run_dir={copy_run}", "planner.name=grid", "+planner.point_per_axis=7")
     assert result.returncode == 2 and len(result.lines) == 1
     assert "planner has no option 'point_per_axis'" in result.lines[0] and "points_per_axis" in result.lines[0]
