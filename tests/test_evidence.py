@@ -14,35 +14,36 @@ COLUMNS = "method,robot,setting,task,seed,episode,normalized_cost,success,final_
 
 def write_record(root, relative, *, method, robot, seed, costs, overrides=(), keys=None, factors=None, cpu="",
                  seconds=60.0, recipe_method=None):
-    """A job record under ``root/relative``: ``costs`` maps (setting, task) to episode costs; ``keys`` maps (setting,
-    task) to the evaluation key's hash (default: one per method, robot, seed, setting, task and overrides);
-    ``factors`` the stage-key sizes (latent_dim, num_experts, num_transitions)."""
+    """A verified job record (``record.json``, :mod:`hierloco.pipeline.records`) under ``root/relative``: ``costs``
+    maps (setting, task) to episode costs; ``keys`` maps (setting, task) to the evaluation key's hash (default: one
+    per method, robot, seed, setting, task and overrides); ``factors`` the stage-key sizes (latent_dim, num_experts,
+    num_transitions)."""
+    from hierloco.pipeline import records
+    from hierloco.pipeline.rundir import StageSpec
+
     record = root / relative
-    record.mkdir(parents=True, exist_ok=True)
     signature = {"method": recipe_method or method, "overrides": [f"robot={robot}", f"seed={seed}", *overrides]}
-    (record / "job.json").write_text(json.dumps({"signature": signature, "seconds": seconds}))
-    lines = [COLUMNS]
-    builds = {}
+    rows, builds, specs = [], {}, []
     for (setting, task), episodes in costs.items():
         for e, c in enumerate(episodes):
-            lines.append(f"{recipe_method or method},{robot},{setting},{task},{seed},{e},{c},nan,0.0,,\n")
+            rows.append({"method": recipe_method or method, "robot": robot, "setting": setting, "task": task,
+                         "seed": seed, "episode": e, "normalized_cost": c, "success": float("nan"),
+                         "final_error": 0.0})
         digest = (keys or {}).get((setting, task)) or hashlib.sha1(
             repr((method, robot, seed, setting, task, tuple(overrides))).encode()).hexdigest()[:12]
-        (record / "evaluation" / setting).mkdir(parents=True, exist_ok=True)
-        (record / "evaluation" / setting / f"{task}-{digest}.npz.key.json").write_text("{}")
+        specs.append(StageSpec(f"evaluation_{setting}_{task}", {}, f"evaluation/{setting}/{task}-{digest}.npz"))
         builds[f"evaluation_{setting}_{task}"] = {"seconds": seconds / max(len(costs), 1), "threads": 1,
                                                   **({"cpu": cpu} if cpu else {})}
-    (record / "episodes.csv").write_text("".join(lines))
-    (record / "builds.json").write_text(json.dumps(builds))
     factors = factors or {}
     if "latent_dim" in factors:
-        (record / "gait_policy.pt.key.json").write_text(json.dumps({"params": {"latent_dim": factors["latent_dim"]}}))
+        specs.append(StageSpec("gait_policy", {"params": {"latent_dim": factors["latent_dim"]}}, "gait_policy.pt"))
     if "num_experts" in factors:
-        (record / "experts.npz.key.json").write_text(json.dumps({"params": {"num_experts": factors["num_experts"]}}))
+        specs.append(StageSpec("experts", {"params": {"num_experts": factors["num_experts"]}}, "experts.npz"))
     for setting in {s for s, _ in costs}:
         if "num_transitions" in factors:
-            (record / f"dynamics_data_{setting}.npz.key.json").write_text(
-                json.dumps({"params": {"num_transitions": factors["num_transitions"]}}))
+            specs.append(StageSpec(f"dynamics_data_{setting}", {"params": {"num_transitions": factors["num_transitions"]}},
+                                   f"dynamics_data_{setting}.npz"))
+    records.save(records.make_record(signature, specs, rows=rows, builds=builds, seconds=seconds), record)
     return record
 
 
@@ -99,12 +100,13 @@ def test_a_table_adopts_the_configuration_of_the_records_it_was_made_like(tmp_pa
 
 
 def test_findings_are_read(tmp_path):
+    from hierloco.pipeline import records
+
     place = tmp_path / "lat" / "paper" / "a1_seed2_rear_limp"
-    place.mkdir(parents=True)
-    (place / "failed.json").write_text(json.dumps({
-        "signature": {"method": "lat", "overrides": ["robot=a1", "seed=2", "robot_profile=own",
-                                                     "settings=[rear_limp]"]},
-        "stage": "dynamics_data_rear_limp", "error": "a1: 500 of 500 random actions ended in a fall\nmore"}))
+    signature = {"method": "lat", "overrides": ["robot=a1", "seed=2", "robot_profile=own", "settings=[rear_limp]"]}
+    finding = {"stage": "dynamics_data_rear_limp", "key": {},
+               "error": "a1: 500 of 500 random actions ended in a fall\nmore"}
+    records.save(records.make_record(signature, [], finding=finding), place)
     [found] = read_findings(tmp_path)
     assert (found["method"], found["robot"], found["seed"], found["settings"]) == ("lat", "a1", 2, "[rear_limp]")
     assert found["error"] == "a1: 500 of 500 random actions ended in a fall"

@@ -15,14 +15,14 @@ def test_ablation_tiny(tmp_path):
     out, runs = tmp_path / "ablations", tmp_path / "runs"
     command = [sys.executable, str(ROOT / "recipes" / "ablations" / "run.py"), "preset=tiny", "robot=a1", "trials=1",
                "run=[latent_dim,dynamics_samples]", "ablations.latent_dim.values=[3,2]",
-               "ablations.dynamics_samples.values=[100,200]", f"out_dir={out}", f"runs_dir={runs}",
+               "ablations.dynamics_samples.values=[100,500]", f"out_dir={out}", f"runs_dir={runs}",
                'overrides=["progress=false", "eval.generalization=null", "eval.videos=[]"]']
     result = subprocess.run(command, cwd=ROOT, env={**os.environ, "WANDB_MODE": "offline"}, capture_output=True,
                             text=True, timeout=600)
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
     rows = read_csv(out / "ablations.csv")
     assert {r["method"] for r in rows} == {"latent_dim=2", "latent_dim=3", "dynamics_samples=100",
-                                           "dynamics_samples=200"}
+                                           "dynamics_samples=500"}
     assert (out / "ablations.png").read_bytes()[:4] == b"\x89PNG"
     # the paper's claims, checked where the study measured them (latent dimension 2 and 3 only here)
     check = (out / "paper_check.md").read_text()
@@ -30,10 +30,10 @@ def test_ablation_tiny(tmp_path):
     assert "| 30 experts better than 10 | a1 | normal | goal_reaching | - |" in check and "| not measured |" in check
     # each trial is a LAT run with the value applied
     assert "latent_dim: 3" in (runs / "latent_dim_3" / "seed0" / "config.yaml").read_text()
-    # the tiny preset's own values (latent dimension 2, 200 samples) are one run that both ablations share
+    # the tiny preset's own values (latent dimension 2, 500 samples) are one run that both ablations share
     assert "study: 3 jobs" in result.stdout, result.stdout[-2000:]
     costs = lambda method: [r["normalized_cost"] for r in rows if r["method"] == method]  # noqa: E731
-    assert costs("latent_dim=2") == costs("dynamics_samples=200") and costs("latent_dim=2")
+    assert costs("latent_dim=2") == costs("dynamics_samples=500") and costs("latent_dim=2")
     # every trial's rows are its own run's episodes, also for a first value that is not the default (its trial's
     # default run is planned while the trial is: the rows must not be the default run's)
     own = lambda run: [r["normalized_cost"] for r in read_csv(runs / run / "seed0" / "episodes.csv")]  # noqa: E731

@@ -19,7 +19,7 @@ def test_adverse_tiny(tmp_path):
     out = tmp_path / "adverse"
     command = [sys.executable, str(ROOT / "recipes" / "adverse" / "run.py"), "preset=tiny", "robots=[a1]", "seeds=[0]",
                "methods=[lat]", "profiles=[own]", "faults.own=[normal,legs_disabled,rear_limp,one_leg_locked]",
-               "samples=[50,200]",
+               "samples=[50,500]",
                "sample_methods=[lat]", f"out_dir={out}", 'overrides=["eval.generalization=null","eval.figures=false"]',
                '+method_overrides.lat=["checks.min_expert_reach=0.3"]', f"records={tmp_path / 'records'}"]
     result = subprocess.run(command, cwd=tmp_path, env={**os.environ, "WANDB_MODE": "offline"}, capture_output=True,
@@ -53,18 +53,18 @@ def test_adverse_tiny(tmp_path):
     assert {p.name for p in (out / "videos").iterdir()} == {f"a1_seed0_{s}_goal_reaching.mp4" for s in
                                                             ("normal", "legs_disabled", "one_leg_locked")}
     samples = read_csv(out / "samples.csv")
-    assert {r["setting"] for r in samples} == {"legs_disabled"} and {int(r["samples"]) for r in samples} == {50, 200}
+    assert {r["setting"] for r in samples} == {"legs_disabled"} and {int(r["samples"]) for r in samples} == {50, 500}
     trained = tmp_path / "outputs" / "lat" / "tiny" / "a1_seed0"
     reused = runs / "samples" / "lat" / "a1_seed0_n50"
     assert (reused / "gait_policy.pt").read_bytes() == (trained / "gait_policy.pt").read_bytes()
     assert (reused / "dynamics_data_legs_disabled.npz").read_bytes() != (
         trained / "dynamics_data_legs_disabled.npz").read_bytes()
-    # at the run's own count (the tiny preset's 200) the re-learned dynamics are the run's: taken, not built again
-    same = runs / "samples" / "lat" / "a1_seed0_n200"
+    # at the run's own count (the tiny preset's 500) the re-learned dynamics are the run's: taken, not built again
+    same = runs / "samples" / "lat" / "a1_seed0_n500"
     assert (same / "dynamics_data_legs_disabled.npz").read_bytes() == (
         trained / "dynamics_data_legs_disabled.npz").read_bytes()
     cost = lambda of: sorted(r["normalized_cost"] for r in of if r["setting"] == "legs_disabled")  # noqa: E731
-    assert cost(r for r in samples if int(r["samples"]) == 200) == cost(rows)
+    assert cost(r for r in samples if int(r["samples"]) == 500) == cost(rows)
     assert (out / "samples.png").read_bytes()[:4] == b"\x89PNG"
     # the tables written elsewhere (results/...) reuse every finished run: nothing to run
     elsewhere = subprocess.run([c for c in command if not c.startswith("out_dir=")] + [

@@ -13,7 +13,7 @@ COSTS = {("lat", "normal"): (0.12, 0.09, 0.011), ("lib", "normal"): (0.46, 0.15,
 
 
 def results_tree(root):
-    jobs = root / "compare_full" / "jobs"
+    jobs = root / "compare_full" / "records"
     for method in ("lat", "lib", "ik", "ik_plain"):
         for seed in range(3):
             costs = {(setting, task): [base[i] + 0.01 * seed] for (m, setting), base in COSTS.items() if m == method
@@ -24,9 +24,12 @@ def results_tree(root):
                          factors={"num_experts": 50, "latent_dim": 3, "num_transitions": 10000}
                          if method == "lat" else {"num_transitions": 10000}, seconds=600.0)
     # the same IK job (same stage keys) run again on another machine by the damage study: another number
-    first = next((jobs / "ik" / "paper" / "a1_seed1" / "evaluation" / "normal").glob("velocity_tracking-*"))
-    key = first.name.split("-")[1].split(".")[0]
-    write_record(root / "adverse" / "jobs", "ik/paper/a1_seed1", method="ik", robot="a1", seed=1,
+    from hierloco.pipeline import records
+
+    stages = records.read(jobs / "ik" / "paper" / "a1_seed1")["stages"]
+    first = next(name for name in stages if name.startswith("evaluation/normal/velocity_tracking-"))
+    key = first.split("-")[1].split(".")[0]
+    write_record(root / "adverse" / "records", "ik/paper/a1_seed1", method="ik", robot="a1", seed=1,
                  costs={("normal", "velocity_tracking"): [0.31]}, keys={("normal", "velocity_tracking"): key},
                  factors={"num_transitions": 10000}, cpu="Intel", seconds=300.0)
     return root
