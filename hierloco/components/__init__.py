@@ -8,45 +8,71 @@
 - ``policies``: the task-policy protocol of closed-loop evaluation. ``evaluation``: closed-loop task episodes and
   gait-policy checks. ``sac``: the SAC agent and its batched training loop. ``sac_low_level``: SAC-SAC's 100 Hz
   velocity-tracking low level and its tracking evaluation.
+
+The names below load their module on first use, so importing one submodule (``hierloco.envs.faults``,
+``hierloco.components.com_model``) does not import the rest.
 """
 
-from hierloco.components.com_ensemble import CoMEnsembleModel
-from hierloco.components.com_model import (
-    MODELS,
-    CoMDynamicsModel,
-    TrainedCoMModel,
-    apply_delta,
-    com_model_module,
-    holdout_split,
-    local_transition,
-    train_com_model,
-)
-from hierloco.components.dynamics_data import TransitionData, UniformActionPolicy, collect_transitions
-from hierloco.components.evaluation import TaskRollout, check_gait_policy, latent_grid_paths, run_task
-from hierloco.components.expert_library import ExpertLibrary, action_motion, build_expert_library
-from hierloco.components.experts import RaibertController, run_closed_loop
-from hierloco.components.gait_policy import LatentGaitPolicy, TrainedGaitPolicy, train_gait_policy
-from hierloco.components.kinematics import LegKinematics
-from hierloco.components.low_level import CommandLowLevel, ExpertReplayLowLevel, LatentLowLevel, LowLevel
-from hierloco.components.planners import (
-    PLANNERS,
-    BoxCEMPlanner,
-    BoxMPPIPlanner,
-    BoxPlannerBase,
-    ExhaustivePlanner,
-    RandomShootingPlanner,
-)
-from hierloco.components.policies import ActorPolicy, TaskPolicy
-from hierloco.components.sac import SACAgent, train_sac
-from hierloco.components.sac_low_level import SACLowLevel, TrainedSACLowLevel, train_sac_low_level
+from __future__ import annotations
 
-__all__ = [
-    "MODELS", "PLANNERS", "ActorPolicy", "BoxCEMPlanner", "BoxMPPIPlanner", "BoxPlannerBase", "CoMDynamicsModel",
-    "CoMEnsembleModel", "com_model_module",
-    "CommandLowLevel", "ExhaustivePlanner", "ExpertLibrary", "ExpertReplayLowLevel", "LatentGaitPolicy",
-    "LatentLowLevel", "LegKinematics", "LowLevel", "RaibertController", "RandomShootingPlanner", "SACAgent",
-    "SACLowLevel", "TaskPolicy", "TaskRollout", "TrainedCoMModel", "TrainedGaitPolicy", "TrainedSACLowLevel", "TransitionData", "UniformActionPolicy",
-    "action_motion", "apply_delta", "build_expert_library", "check_gait_policy", "collect_transitions",
-    "holdout_split", "latent_grid_paths", "local_transition", "run_closed_loop", "run_task", "train_com_model",
-    "train_gait_policy", "train_sac", "train_sac_low_level",
-]
+import importlib
+
+_WHERE = {
+    "ActorPolicy": "hierloco.components.policies",
+    "BoxCEMPlanner": "hierloco.components.planners",
+    "BoxMPPIPlanner": "hierloco.components.planners",
+    "BoxPlannerBase": "hierloco.components.planners",
+    "CoMDynamicsModel": "hierloco.components.com_model",
+    "CoMEnsembleModel": "hierloco.components.com_ensemble",
+    "CommandLowLevel": "hierloco.components.low_level",
+    "ExhaustivePlanner": "hierloco.components.planners",
+    "ExpertLibrary": "hierloco.components.expert_library",
+    "ExpertReplayLowLevel": "hierloco.components.low_level",
+    "LatentGaitPolicy": "hierloco.components.gait_policy",
+    "LatentLowLevel": "hierloco.components.low_level",
+    "LegKinematics": "hierloco.components.kinematics",
+    "LowLevel": "hierloco.components.low_level",
+    "MODELS": "hierloco.components.com_model",
+    "PLANNERS": "hierloco.components.planners",
+    "RaibertController": "hierloco.components.experts",
+    "RandomShootingPlanner": "hierloco.components.planners",
+    "SACAgent": "hierloco.components.sac",
+    "SACLowLevel": "hierloco.components.sac_low_level",
+    "TaskPolicy": "hierloco.components.policies",
+    "TaskRollout": "hierloco.components.evaluation",
+    "TrainedCoMModel": "hierloco.components.com_model",
+    "TrainedGaitPolicy": "hierloco.components.gait_policy",
+    "TrainedSACLowLevel": "hierloco.components.sac_low_level",
+    "TransitionData": "hierloco.components.dynamics_data",
+    "UniformActionPolicy": "hierloco.components.dynamics_data",
+    "action_motion": "hierloco.components.expert_library",
+    "apply_delta": "hierloco.components.com_model",
+    "build_expert_library": "hierloco.components.expert_library",
+    "check_gait_policy": "hierloco.components.evaluation",
+    "collect_transitions": "hierloco.components.dynamics_data",
+    "com_model_module": "hierloco.components.com_model",
+    "holdout_split": "hierloco.components.com_model",
+    "latent_grid_paths": "hierloco.components.evaluation",
+    "local_transition": "hierloco.components.com_model",
+    "run_closed_loop": "hierloco.components.experts",
+    "run_task": "hierloco.components.evaluation",
+    "train_com_model": "hierloco.components.com_model",
+    "train_gait_policy": "hierloco.components.gait_policy",
+    "train_sac": "hierloco.components.sac",
+    "train_sac_low_level": "hierloco.components.sac_low_level",
+}
+
+
+def __getattr__(name: str):
+    if name in _WHERE:
+        value = getattr(importlib.import_module(_WHERE[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_WHERE))
+
+
+__all__ = sorted(_WHERE)

@@ -55,7 +55,8 @@ CHECKPOINT_KIND = "com_model"
 OUTPUT_NAMES = ("dx", "dy", "dyaw", "vx_next", "vy_next")
 MIN_TRANSITIONS = 10
 
-MODELS = Registry("dynamics_model", context=("action_dim", "input_mean", "input_std", "output_mean", "output_std"))
+MODELS = Registry("dynamics_model", context=("action_dim", "input_mean", "input_std", "output_mean", "output_std"),
+                  modules=("hierloco.components.com_ensemble",))
 """The CoM dynamics models by name (``mlp``, ``ensemble``); options are their constructors' keyword arguments."""
 
 
@@ -532,4 +533,3 @@ def prediction_errors(model: CoMDynamicsModel, com_states, actions) -> torch.Ten
 __all__ = ["MODELS", "CoMDynamicsModel", "TrainedCoMModel", "apply_delta", "com_model_module", "holdout_split",
            "local_transition", "model_name", "prediction_errors", "train_com_model"]
 
-import hierloco.components.com_ensemble  # noqa: E402,F401  (registers the ensemble)

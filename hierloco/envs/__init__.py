@@ -3,56 +3,76 @@ latent-action, velocity-command and world-model environments, the tasks and navi
 
 Importing it does not import :mod:`hierloco.components` (the low levels, models and planners that plug into these
 environments).
+
+The names below load their module on first use, so importing one submodule (``hierloco.envs.faults``,
+``hierloco.components.com_model``) does not import the rest.
 """
 
-from hierloco.envs.batched_sim import BatchedSimulator, SimulationResult, available_cores
-from hierloco.envs.latent_env import LatentActionEnv
-from hierloco.envs.latent_wrapper import LatentActionWrapper
-from hierloco.envs.locomotion import (
-    LocomotionEnv,
-    LocomotionPhysics,
-    LocomotionTask,
-    clamp_joint_targets,
-    joint_target_limits,
-    make_dm_env,
-    periods_per_action,
-    reset_joint_noise,
-    robot_has_fallen,
-)
-from hierloco.envs.low_level import LowLevel
-from hierloco.envs.navigation import Arena, clearance, cluttered_arena, plan_path
-from hierloco.envs.robots import Obstacle, RobotSpec, compile_model, get_robot, register_robot, robot_from_mjcf
-from hierloco.envs.tasks import (
-    TASKS,
-    GoalReaching,
-    Task,
-    TaskResult,
-    TrajectoryTracking,
-    VelocityTracking,
-    make_task,
-    s_path,
-    task_options,
-)
-from hierloco.envs.torchrl_env import OBSERVATION_KEYS, make_env
-from hierloco.envs.transforms import (
-    CoMState,
-    ContinueAfterFalls,
-    DisableLegs,
-    GoalObservation,
-    TaskEpisode,
-    TaskReward,
-    TaskTransform,
-    task_transforms,
-)
-from hierloco.envs.velocity_command_env import VelocityCommandEnv
-from hierloco.envs.world_model import RISKS, CoMWorldModelEnv
+from __future__ import annotations
 
-__all__ = [
-    "OBSERVATION_KEYS", "RISKS", "LatentActionWrapper", "TASKS", "Arena", "BatchedSimulator", "CoMState", "CoMWorldModelEnv", "ContinueAfterFalls", "DisableLegs",
-    "GoalObservation", "GoalReaching", "LatentActionEnv", "LocomotionEnv", "LocomotionPhysics", "LocomotionTask",
-    "LowLevel", "Obstacle", "RobotSpec", "SimulationResult", "Task", "TaskEpisode", "TaskResult", "TaskReward",
-    "TaskTransform", "TrajectoryTracking", "VelocityCommandEnv", "VelocityTracking", "available_cores", "clamp_joint_targets",
-    "clearance", "cluttered_arena", "compile_model", "get_robot", "joint_target_limits", "make_dm_env", "make_env",
-    "make_task", "periods_per_action", "plan_path", "register_robot", "reset_joint_noise", "robot_from_mjcf",
-    "robot_has_fallen", "s_path", "task_options", "task_transforms",
-]
+import importlib
+
+_WHERE = {
+    "Arena": "hierloco.envs.navigation",
+    "BatchedSimulator": "hierloco.envs.batched_sim",
+    "CoMState": "hierloco.envs.transforms",
+    "CoMWorldModelEnv": "hierloco.envs.world_model",
+    "ContinueAfterFalls": "hierloco.envs.transforms",
+    "DisableLegs": "hierloco.envs.transforms",
+    "GoalObservation": "hierloco.envs.transforms",
+    "GoalReaching": "hierloco.envs.tasks",
+    "LatentActionEnv": "hierloco.envs.latent_env",
+    "LatentActionWrapper": "hierloco.envs.latent_wrapper",
+    "LocomotionEnv": "hierloco.envs.locomotion",
+    "LocomotionPhysics": "hierloco.envs.locomotion",
+    "LocomotionTask": "hierloco.envs.locomotion",
+    "LowLevel": "hierloco.envs.low_level",
+    "OBSERVATION_KEYS": "hierloco.envs.torchrl_env",
+    "Obstacle": "hierloco.envs.robots",
+    "RISKS": "hierloco.envs.world_model",
+    "RobotSpec": "hierloco.envs.robots",
+    "SimulationResult": "hierloco.envs.batched_sim",
+    "TASKS": "hierloco.envs.tasks",
+    "Task": "hierloco.envs.tasks",
+    "TaskEpisode": "hierloco.envs.transforms",
+    "TaskResult": "hierloco.envs.tasks",
+    "TaskReward": "hierloco.envs.transforms",
+    "TaskTransform": "hierloco.envs.transforms",
+    "TrajectoryTracking": "hierloco.envs.tasks",
+    "VelocityCommandEnv": "hierloco.envs.velocity_command_env",
+    "VelocityTracking": "hierloco.envs.tasks",
+    "available_cores": "hierloco.envs.batched_sim",
+    "clamp_joint_targets": "hierloco.envs.locomotion",
+    "clearance": "hierloco.envs.navigation",
+    "cluttered_arena": "hierloco.envs.navigation",
+    "compile_model": "hierloco.envs.robots",
+    "get_robot": "hierloco.envs.robots",
+    "joint_target_limits": "hierloco.envs.locomotion",
+    "make_dm_env": "hierloco.envs.locomotion",
+    "make_env": "hierloco.envs.torchrl_env",
+    "make_task": "hierloco.envs.tasks",
+    "periods_per_action": "hierloco.envs.locomotion",
+    "plan_path": "hierloco.envs.navigation",
+    "register_robot": "hierloco.envs.robots",
+    "reset_joint_noise": "hierloco.envs.locomotion",
+    "robot_from_mjcf": "hierloco.envs.robots",
+    "robot_has_fallen": "hierloco.envs.locomotion",
+    "s_path": "hierloco.envs.tasks",
+    "task_options": "hierloco.envs.tasks",
+    "task_transforms": "hierloco.envs.transforms",
+}
+
+
+def __getattr__(name: str):
+    if name in _WHERE:
+        value = getattr(importlib.import_module(_WHERE[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_WHERE))
+
+
+__all__ = sorted(_WHERE)

@@ -37,9 +37,19 @@ class Stage:
     params: dict
     after: dict
     filename: str
-    artifact: Any
+    artifact: Any  # the artifact's class, or "package.module:Class" (imported when the stage runs)
     build: Callable
     check: Callable | None = None
+
+    @property
+    def artifact_class(self):
+        """The artifact's class (imported now when given as ``"package.module:Class"``)."""
+        if isinstance(self.artifact, str):
+            import importlib
+
+            module, _, name = self.artifact.partition(":")
+            return getattr(importlib.import_module(module), name)
+        return self.artifact
 
     @property
     def key(self) -> dict:

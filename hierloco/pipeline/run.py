@@ -172,7 +172,7 @@ class Run:
             with temporaries_in(self.path):
                 artifact = self.dir.stage(stage.name, stage.key, lambda: build(self, stage.params, *inputs),
                                           lambda a, path: _save_without_wall_clock(a, path, timings),
-                                          stage.artifact.load, stage.filename)
+                                          stage.artifact_class.load, stage.filename)
         except findings() as error:  # a finding about the setting: kept, so a study need not run it again
             if not self.dir.readonly:
                 with temporaries_in(self.path):

@@ -16,27 +16,29 @@ Stages, in order (see ``docs/index.md`` for the paper's steps):
 from __future__ import annotations
 
 import warnings
+from typing import TYPE_CHECKING
 
 import numpy as np
-import torch
+
 from omegaconf import OmegaConf
 
-from hierloco.components.com_model import TrainedCoMModel, train_com_model
-from hierloco.components.dynamics_data import TransitionData, collect_transitions
-from hierloco.components.evaluation import check_gait_policy, run_task
-from hierloco.components.expert_library import ExpertLibrary, build_expert_library, require_expert_library_quality
-from hierloco.components.gait_policy import TrainedGaitPolicy, train_gait_policy
 from hierloco.envs.faults import fault_legs, is_unadapted, physical_setting, setting_robot
-from hierloco.envs.latent_env import LatentActionEnv
-from hierloco.envs.locomotion import periods_per_action
 from hierloco.envs.robots import CONTROL_TIMESTEP, hardware_options
 from hierloco.errors import Finding
-from hierloco.results import TaskEvaluation
-from hierloco.pipeline.plan import JsonReport, SettingPlan, Stage
-from hierloco.pipeline.rundir import digest
-from hierloco.trained import make_world_model
 from hierloco.pipeline import report
 from hierloco.pipeline.config import make_task_from_spec, section, task_specs
+from hierloco.pipeline.plan import JsonReport, SettingPlan, Stage
+from hierloco.pipeline.rundir import digest
+from hierloco.results import TaskEvaluation
+
+if TYPE_CHECKING:
+    from hierloco.components.com_model import TrainedCoMModel
+    from hierloco.components.dynamics_data import TransitionData
+    from hierloco.components.expert_library import ExpertLibrary
+    from hierloco.components.gait_policy import TrainedGaitPolicy
+
+# A recipe imports this module to plan its stages, before any work (and a study plans every job's stages): so
+# planning needs no network or TorchRL library, and the builders import theirs when they run.
 
 
 class GaitPolicyCheck(JsonReport):
@@ -51,12 +53,15 @@ class GaitPolicyQualityError(Finding, ValueError):
 # ---------------------------------------------------------------------------------------------------- experts
 def experts_stage(cfg, robot_digest: str) -> Stage:
     params = {"seed": cfg.seed, "steps_per_action": cfg.steps_per_action, **section(cfg, "experts")}
-    return Stage("experts", params, {"robot": robot_digest}, "experts.npz", ExpertLibrary, build_experts,
+    return Stage("experts", params, {"robot": robot_digest}, "experts.npz",
+                 "hierloco.components.expert_library:ExpertLibrary", build_experts,
                  check_experts)
 
 
 def build_experts(run, params) -> ExpertLibrary:
     """The expert library, checked to walk as commanded (Li et al., Sec. III-A)."""
+    from hierloco.components.expert_library import build_expert_library
+
     with warnings.catch_warnings():  # check_experts raises with the same diagnosis, in one line
         warnings.filterwarnings("ignore", message=".*do not walk as commanded", category=RuntimeWarning)
         return build_expert_library(run.robot, params["num_experts"], steps_per_action=params["steps_per_action"],
@@ -68,18 +73,24 @@ def build_experts(run, params) -> ExpertLibrary:
 def check_experts(run, library: ExpertLibrary) -> None:
     """Stops the run (:class:`ExpertQualityError`, with a diagnosis) when the experts do not cover the command
     box: how far off, in which direction, what to try."""
+    from hierloco.components.expert_library import require_expert_library_quality
+
     require_expert_library_quality(library, robot=run.robot, min_reach=run.cfg.checks.min_expert_reach)
 
 
 # ---------------------------------------------------------------------------------------------------- gait policy
 def gait_policy_stage(cfg, experts: Stage) -> Stage:
     params = {"seed": cfg.seed, "device": cfg.device, **section(cfg, "policy")}
-    return Stage("gait_policy", params, {"experts": experts.digest}, "gait_policy.pt", TrainedGaitPolicy,
+    return Stage("gait_policy", params, {"experts": experts.digest}, "gait_policy.pt",
+                 "hierloco.components.gait_policy:TrainedGaitPolicy",
                  build_gait_policy)
 
 
 def build_gait_policy(run, params, library: ExpertLibrary) -> TrainedGaitPolicy:
     """``pi(t, z)`` and one latent per expert, fitted jointly to the experts (Li et al., Sec. III-B)."""
+    from hierloco.components.gait_policy import train_gait_policy
+    from hierloco.envs.locomotion import periods_per_action
+
     periods = periods_per_action(run.robot, library.steps_per_action)
     trained = train_gait_policy(library.joint_targets, periods_per_action=periods, progress=run.progress, **params)
     run.logger.log_curve("train/gait_policy", {"loss": trained.metadata["loss_history"]}, step_name="epoch")
@@ -95,6 +106,8 @@ def gait_policy_check_stage(cfg, policy: Stage) -> Stage:
 
 def build_gait_policy_check(run, params, low_level, library: ExpertLibrary) -> GaitPolicyCheck:
     """Reproduction of every expert and interpolation between pairs by ``pi(., z)``, in simulation."""
+    from hierloco.components.evaluation import check_gait_policy
+
     latents = low_level.trained.latents.numpy()
     return GaitPolicyCheck(check_gait_policy(low_level, library, latents, **params))
 
@@ -137,11 +150,15 @@ def dynamics_data_stage(cfg, low_level: dict, setting: str, robot) -> Stage:
     params = {"seed": cfg.seed, "setting": setting, "disabled_legs": list(locked), "limp_legs": list(limp),
               **{k: d[k] for k in DATA_KEYS}, **hardware_params(cfg, setting)}
     return Stage(f"dynamics_data_{setting}", params, {"low_level": low_level},
-                 f"dynamics_data_{setting}.npz", TransitionData, build_dynamics_data)
+                 f"dynamics_data_{setting}.npz", "hierloco.components.dynamics_data:TransitionData",
+                 build_dynamics_data)
 
 
 def build_dynamics_data(run, params, make_low_level) -> TransitionData:
     """Random actions held for one action each, chained on many robots (Li et al., Sec. III-C)."""
+    from hierloco.components.dynamics_data import collect_transitions
+    from hierloco.envs.latent_env import LatentActionEnv
+
     env = LatentActionEnv(make_low_level(params["num_robots"]), num_robots=params["num_robots"],
                           disabled_legs=params["disabled_legs"], limp_legs=params["limp_legs"], seed=params["seed"],
                           nthread=run.nthread,
@@ -172,11 +189,13 @@ def dynamics_model_stage(cfg, data: Stage, setting: str) -> Stage:
     params = {"seed": cfg.seed, "device": cfg.device, "duration": cfg.steps_per_action * CONTROL_TIMESTEP,
               **model_params(cfg)}
     return Stage(f"dynamics_model_{setting}", params, {"data": data.digest}, f"dynamics_model_{setting}.pt",
-                 TrainedCoMModel, build_dynamics_model)
+                 "hierloco.components.com_model:TrainedCoMModel", build_dynamics_model)
 
 
 def build_dynamics_model(run, params, data: TransitionData, low_level) -> TrainedCoMModel:
     """The local-frame delta model ``(dx, dy, dyaw, vx', vy') = f(vx, vy, a)``, early-stopped on held-out data."""
+    from hierloco.components.com_model import train_com_model
+
     features = low_level.action_features(data.action)
     model = train_com_model(data.com_state, features, data.next_com_state, progress=run.progress, **params)
     setting = run.current.removeprefix("dynamics_model_")
@@ -226,7 +245,10 @@ def evaluation_rollout(robot, params: dict, task, low_level, model: TrainedCoMMo
     """The :class:`~hierloco.components.evaluation.TaskRollout` of an evaluation stage's ``params`` (setting,
     planner, seed, device, hardware): what :func:`build_evaluation` scores, and what ``recipes/adverse/trace.py``
     replays from a finished run's evaluation key."""
+    from hierloco.components.evaluation import run_task
     from hierloco.components.planners import make_planner
+    from hierloco.envs.latent_env import LatentActionEnv
+    from hierloco.trained import make_world_model
 
     world_model = make_world_model(model.model, low_level, device=params["device"])
     planner_section = params["planner"]
@@ -267,8 +289,3 @@ def per_setting_stages(cfg, low_level: dict, robot) -> list[SettingPlan]:
 
 def evaluation_stages(cfg, setting: str, model: Stage, low_level: dict) -> list[Stage]:
     return [evaluation_stage(cfg, name, spec, setting, model, low_level) for name, spec in task_specs(cfg).items()]
-
-
-def set_seed(seed: int) -> None:
-    torch.manual_seed(seed)
-    np.random.seed(seed)

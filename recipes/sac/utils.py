@@ -4,20 +4,19 @@ instead of ``pi(., z)``). Each task trains on its own ``training_split()``, half
 
 from __future__ import annotations
 
-import torch
-from torchrl.envs import Compose, TransformedEnv
+from typing import TYPE_CHECKING
 
-from hierloco.components.evaluation import run_task
-from hierloco.components.policies import ActorPolicy
-from hierloco.components.sac import SACAgent, train_sac
-from hierloco.envs.latent_env import LatentActionEnv
-from hierloco.envs.tasks import Task
-from hierloco.envs.transforms import GoalObservation, task_transforms
 from hierloco.pipeline import config, report, stages
 from hierloco.pipeline.config import make_task_from_spec, section, task_specs
 from hierloco.pipeline.plan import Plan, Stage, TaskPlan
 from hierloco.pipeline.rundir import digest
 from hierloco.results import TaskEvaluation
+
+if TYPE_CHECKING:  # the SAC parts are imported when a stage runs, not when the recipe plans
+    from torchrl.envs import TransformedEnv
+
+    from hierloco.components.sac import SACAgent
+    from hierloco.envs.tasks import Task
 
 METHOD = "sac"
 
@@ -74,7 +73,8 @@ def sac_stage(cfg, name: str, spec: dict, low_level: dict) -> Stage:
     evaluates the training targets only, as tuning does: the same agent, so its key leaves the split out)."""
     trained_on = {k: v for k, v in spec.items() if k != "split"}
     params = {"seed": cfg.seed, "device": cfg.device, "task_name": name, "task": trained_on, **section(cfg, "sac")}
-    return Stage(f"sac_{name}", params, {"low_level": low_level}, f"sac_{name}.pt", SACAgent, train_high_level)
+    return Stage(f"sac_{name}", params, {"low_level": low_level}, f"sac_{name}.pt", "hierloco.components.sac:SACAgent",
+                 train_high_level)
 
 
 def sac_evaluation_stage(cfg, name: str, spec: dict, agent: Stage) -> Stage:
@@ -87,6 +87,12 @@ def sac_evaluation_stage(cfg, name: str, spec: dict, agent: Stage) -> Stage:
 
 def task_env(low_level, task: Task, num_robots: int, seed: int, nthread: int | None = None) -> TransformedEnv:
     """``num_robots`` robots on ``task``, robot ``b`` on episode ``b % episodes``, with the goal observation."""
+    import torch
+    from torchrl.envs import Compose, TransformedEnv
+
+    from hierloco.envs.latent_env import LatentActionEnv
+    from hierloco.envs.transforms import GoalObservation, task_transforms
+
     episodes = torch.arange(num_robots) % task.num_episodes
     env = LatentActionEnv(low_level, num_robots=num_robots, seed=seed, nthread=nthread)
     return TransformedEnv(env, Compose(task_transforms(task, episodes), GoalObservation(task)))
@@ -95,6 +101,9 @@ def task_env(low_level, task: Task, num_robots: int, seed: int, nthread: int | N
 def train_high_level(run, params, make_low_level) -> SACAgent:
     """Goal-conditioned SAC (TorchRL's ``SACLoss``, :func:`hierloco.components.sac.train_sac`) on the training half
     of a task's targets, ``total_frames`` high-level actions collected on ``num_robots`` robots at once."""
+    from hierloco.components.sac import SACAgent, train_sac
+    from hierloco.envs.transforms import GoalObservation
+
     task = make_task_from_spec(params["task_name"], params["task"]).training_split()
     low_level = make_low_level(params["num_robots"])
     agent = SACAgent.build(GoalObservation.SIZE, low_level.action_low, low_level.action_high, hidden=params["hidden"],
@@ -115,6 +124,11 @@ def train_high_level(run, params, make_low_level) -> SACAgent:
 
 def build_evaluation(run, params, agent: SACAgent, make_low_level) -> TaskEvaluation:
     """The trained policy (its mean action) on every target of a task, one robot per episode."""
+    from hierloco.components.evaluation import run_task
+    from hierloco.components.policies import ActorPolicy
+    from hierloco.envs.latent_env import LatentActionEnv
+    from hierloco.envs.transforms import GoalObservation
+
     task = make_task_from_spec(params["task_name"], params["task"])
     env = LatentActionEnv(make_low_level(task.num_episodes), num_robots=task.num_episodes, record=True,
                           seed=params["seed"], nthread=run.nthread)

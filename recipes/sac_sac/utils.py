@@ -3,17 +3,15 @@ level per task as in ``recipes/sac``), its low level and its config checks."""
 
 from __future__ import annotations
 
-from hierloco.components.sac_low_level import (
-    SACLowLevel,
-    TrainedSACLowLevel,
-    command_grid,
-    evaluate_velocity_tracking,
-    train_sac_low_level,
-)
+from typing import TYPE_CHECKING
+
 from hierloco.pipeline import config
 from hierloco.pipeline.plan import JsonReport, Plan, Stage
 from recipes.sac_sac.report import write_low_level_report
 from recipes.sac import utils as sac
+
+if TYPE_CHECKING:  # imported when a stage runs, not when the recipe plans
+    from hierloco.components.sac_low_level import TrainedSACLowLevel
 
 METHOD = "sac_sac"
 
@@ -41,10 +39,11 @@ def plan(cfg, robot) -> Plan:
     from hierloco.envs.robots import robot_fingerprint
 
     low = Stage("sac_low_level", {"seed": cfg.seed, **config.section(cfg, "low_level")},
-                       {"robot": robot_fingerprint(robot)}, "sac_low_level.pt", TrainedSACLowLevel, build_low_level)
+                {"robot": robot_fingerprint(robot)}, "sac_low_level.pt",
+                "hierloco.components.sac_low_level:TrainedSACLowLevel", build_low_level)
     report = Stage("sac_low_level_tracking", {"seed": cfg.seed, "steps_per_action": cfg.steps_per_action,
-                                                     "actor": cfg.low_level_actor, **config.section(cfg, "tracking")},
-                          {"sac_low_level": low.digest}, "sac_low_level_tracking.json", TrackingReport, build_tracking)
+                                              "actor": cfg.low_level_actor, **config.section(cfg, "tracking")},
+                   {"sac_low_level": low.digest}, "sac_low_level_tracking.json", TrackingReport, build_tracking)
     low_level = {"kind": "sac_command", "sac_low_level": low.digest, "steps_per_action": cfg.steps_per_action,
                  "actor": cfg.low_level_actor}
     return Plan(low_level=low, low_level_tracking=report, tasks=sac.high_level_stages(cfg, low_level))
@@ -53,6 +52,8 @@ def plan(cfg, robot) -> Plan:
 def build_low_level(run, params) -> TrainedSACLowLevel:
     """SAC on many robots at once, one 100 Hz control step per env step; checkpointed as it trains, so a killed run
     resumes from its last checkpoint (the checkpoint is removed once the stage is saved)."""
+    from hierloco.components.sac_low_level import train_sac_low_level
+
     checkpoint = run.path / "sac_low_level.training.pt"
     trained = train_sac_low_level(run.robot, checkpoint_path=checkpoint, nthread=run.nthread, progress=run.progress,
                                   logger=run.logger, log_every=max(params["num_robots"], params["total_frames"] // 50),
@@ -63,6 +64,8 @@ def build_low_level(run, params) -> TrainedSACLowLevel:
 
 def build_tracking(run, params, low_level) -> TrackingReport:
     """The low level on its own: commanded against achieved velocity on a grid over the command box, and falls."""
+    from hierloco.components.sac_low_level import command_grid, evaluate_velocity_tracking
+
     commands = command_grid(run.robot, params["points_per_axis"])
     report = evaluate_velocity_tracking(low_level(len(commands)), commands, num_actions=params["num_actions"],
                                         seed=params["seed"], nthread=run.nthread)
@@ -105,4 +108,6 @@ def manifest(cfg, robot) -> dict:
 def make_low_level(run, trained: TrainedSACLowLevel):
     """The trained velocity policy as a low level; it keeps a clock per robot (and, stochastic, its own random
     stream), so each env gets its own."""
+    from hierloco.components.sac_low_level import SACLowLevel
+
     return lambda num_robots: SACLowLevel(trained, **low_level_options(run.cfg))
