@@ -127,3 +127,44 @@ def test_an_option_added_at_its_default_keeps_the_keys_of_a_recorded_job(monkeyp
     keys = {spec.filename: spec.key for spec in studies.planned_stages(changed)}
     differ = [name for name, entry in record["stages"].items() if keys.get(name) != entry["key"]]
     assert differ and all(name.startswith("evaluation/") for name in differ)
+
+
+def test_a_dynamics_model_from_a_test_module_trains_in_a_recipe_and_loads_again(copy_run):
+    """A model registered here (one class) is trained by the LAT recipe with ``dynamics.model=tanh_mlp`` and its
+    option, recorded in the stage key, and loaded back by ``hierloco.load_run`` through the registry."""
+    import json
+
+    from torch import nn
+    from torchrl.modules import MLP
+
+    import hierloco
+    from hierloco.components.com_model import MODELS, CoMDynamicsModel
+
+    @MODELS.register("tanh_mlp")
+    class TanhMLP(CoMDynamicsModel):
+        """The CoM model with ``layers`` tanh layers of ``hidden`` units."""
+
+        def __init__(self, action_dim: int, hidden: int = 64, *, layers: int = 3, **statistics):
+            super().__init__(action_dim, hidden, **statistics)
+            self.layers = int(layers)
+            self.net = MLP(in_features=2 + action_dim, out_features=5, num_cells=[hidden] * self.layers,
+                           activation_class=nn.Tanh)
+
+        def config(self) -> dict:
+            return {**super().config(), "layers": self.layers}
+
+    try:
+        for stale in [copy_run / "dynamics_model_normal.pt", copy_run / "dynamics_model_normal.pt.key.json"]:
+            stale.unlink()
+        result = run_in_process("lat", "preset=tiny", "progress=false", f"run_dir={copy_run}", "eval.videos=[]",
+                                "dynamics.model=tanh_mlp", "+dynamics.layers=2")
+        assert result.returncode == 0, result.stderr[-3000:]
+        key = json.loads((copy_run / "dynamics_model_normal.pt.key.json").read_text())["params"]
+        assert key["model"] == "tanh_mlp" and key["layers"] == 2
+        model = hierloco.load_run(copy_run).com_model("normal").model
+        assert isinstance(model, TanhMLP) and model.layers == 2
+        refused = run_in_process("lat", "preset=tiny", f"run_dir={copy_run}", "dynamics.model=tanh_mlp",
+                                 "+dynamics.layer=2")
+        assert refused.returncode == 2 and "has no option 'layer' (its options: hidden, layers)" in refused.stderr
+    finally:
+        MODELS.unregister("tanh_mlp")

@@ -52,10 +52,23 @@ def test_compare_through_ray_equals_the_jobs_one_by_one(tmp_path):
            "lat 0.16 +- 0.10, lib 0.58 +- 0.01 | not measured |" in (by_ray / "out" / "paper_check.md").read_text()
     assert (by_ray / "outputs" / "lib" / "tiny" / "a1_seed1" / "job.json").exists()
 
-    # a re-run (say, after the study was killed) reuses every finished job without submitting it
+    # a re-run (say, after the study was killed) reuses every finished job without submitting it, and a job's
+    # rows are those of the evaluations its plan names: a user's run of another planner into the study's LIB run
+    # directory (its own table now in the run directory) changes nothing in the study's table
+    import json
+
+    from tests.runner import run_in_process
+
+    lib_dir = by_ray / "outputs" / "lib" / "tiny" / "a1_seed0"
+    signature = json.loads((lib_dir / "job.json").read_text())["signature"]
+    assert run_in_process("lib", f"run_dir={lib_dir}", *signature["overrides"], "planner.horizon=2").returncode == 0
+    horizon2 = read_csv(lib_dir / "episodes.csv")
     again = compare(by_ray, f"out_dir={by_ray / 'out'}")
     assert again.returncode == 0 and "study: 4 jobs, 4 reused" in again.stdout, again.stdout[-2000:]
     assert comparable(read_csv(by_ray / "out" / "comparison.csv")) == comparable(through_ray)
+    costs = lambda rows: sorted((r["task"], r["episode"], r["normalized_cost"]) for r in rows)  # noqa: E731
+    lib0 = [r for r in through_ray if r["method"] == "lib" and r["seed"] == 0]
+    assert costs(horizon2) != costs(lib0)  # the horizon-2 numbers differ, and are not reported
     # reused jobs cost nothing now, and the wall-clock table still says what building their stages took
     wallclock = (by_ray / "out" / "wallclock.md").read_text()
     assert "| lib | a1 | 2 |" in wallclock and "| ik | a1 | 2 |" in wallclock, wallclock
