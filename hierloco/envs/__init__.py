@@ -10,7 +10,7 @@ The names below load their module on first use, so importing one submodule (``hi
 
 from __future__ import annotations
 
-import importlib
+from hierloco._lazy import lazy_names
 
 _WHERE = {
     "Arena": "hierloco.envs.navigation",
@@ -63,16 +63,6 @@ _WHERE = {
 }
 
 
-def __getattr__(name: str):
-    if name in _WHERE:
-        value = getattr(importlib.import_module(_WHERE[name]), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_WHERE))
-
+__getattr__, __dir__ = lazy_names(__name__, _WHERE, globals())
 
 __all__ = sorted(_WHERE)

@@ -20,6 +20,7 @@ stage was interrupted and that re-running resumes (exit 130); anything else is a
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import functools
 import os
@@ -47,6 +48,22 @@ def report_error(error: BaseException) -> None:
               "same command again to resume", file=sys.stderr)
     else:
         print(f"error: {one_line(error)}", file=sys.stderr)
+
+
+@contextlib.contextmanager
+def one_line_errors():
+    """Within the block, a user's error (a bad config, a corrupted artifact, a run directory in use, a finding, a
+    full disk) is printed as one line and ends the process with exit status 2; anything else propagates."""
+    try:
+        yield
+    except user_errors() as error:
+        report_error(error)
+        sys.exit(EXIT_USER_ERROR)
+    except OSError as error:
+        if not disk_full(error):
+            raise
+        report_error(error)
+        sys.exit(EXIT_USER_ERROR)
 
 
 def check_environment() -> None:
@@ -101,16 +118,8 @@ def recipe_main(utils: ModuleType, config_name: str = "config") -> Callable:
         @hydra.main(config_path=folder, config_name=config_name, version_base=None)
         @functools.wraps(body)
         def task(cfg):
-            try:
+            with one_line_errors():  # reported here: Hydra would add a line of its own
                 return run(cfg)
-            except user_errors() as error:  # reported here: Hydra would add a line of its own
-                report_error(error)
-                sys.exit(EXIT_USER_ERROR)
-            except OSError as error:
-                if not disk_full(error):
-                    raise
-                report_error(error)
-                sys.exit(EXIT_USER_ERROR)
 
         @functools.wraps(body)
         def entry():
@@ -140,4 +149,4 @@ def recipe_main(utils: ModuleType, config_name: str = "config") -> Callable:
     return decorate
 
 
-__all__ = ["check_environment", "disk_full", "recipe_main", "report_error"]
+__all__ = ["check_environment", "disk_full", "one_line_errors", "recipe_main", "report_error"]

@@ -24,7 +24,7 @@ import re
 import sys
 from pathlib import Path
 
-from hierloco.pipeline.errors import EXIT_INTERRUPTED, EXIT_USER_ERROR, ConfigError, one_line, user_errors
+from hierloco.pipeline.errors import EXIT_INTERRUPTED, EXIT_USER_ERROR, ConfigError, one_line
 
 EVALUATION_KEYS = ("eval", "planner", "settings", "nthread", "device", "progress", "logger")
 USAGE = "usage: python recipes/evaluate.py [-m] run_dir=<trained run> [name=<label>] [eval/planner overrides]"
@@ -130,32 +130,28 @@ def evaluate_main(arguments: list[str] | None = None) -> None:
     """The command line of ``recipes/evaluate.py``; exits 2 on a user error, printing one line."""
     from hydra.errors import HydraException
 
-    from hierloco.pipeline.entry import disk_full, report_error, sigterm_as_interrupt
+    from hierloco.pipeline.entry import one_line_errors, report_error, sigterm_as_interrupt
 
     os.environ.setdefault("HYDRA_FULL_ERROR", "1")
     sigterm_as_interrupt()
     run_dir, name, multirun, overrides = split_arguments(sys.argv[1:] if arguments is None else arguments)
     try:
-        if run_dir is None:
-            raise ConfigError(f"give the trained run: run_dir=... ({USAGE})")
-        jobs = sweep(overrides) if multirun else [overrides]
-        if multirun and name is not None and len(jobs) > 1:
-            raise ConfigError("name= names one evaluation; a sweep names each by its overrides")
-        for job in jobs:
-            label = name
-            if multirun and name is None:
-                label = re.sub(r"[^A-Za-z0-9_.=,-]", "_", ",".join(job)) or "default"
-                print(f"evaluation {label}: {' '.join(job) or '(the run config)'}", flush=True)
-            evaluate(run_dir, job, label)
+        with one_line_errors():
+            if run_dir is None:
+                raise ConfigError(f"give the trained run: run_dir=... ({USAGE})")
+            jobs = sweep(overrides) if multirun else [overrides]
+            if multirun and name is not None and len(jobs) > 1:
+                raise ConfigError("name= names one evaluation; a sweep names each by its overrides")
+            for job in jobs:
+                label = name
+                if multirun and name is None:
+                    label = re.sub(r"[^A-Za-z0-9_.=,-]", "_", ",".join(job)) or "default"
+                    print(f"evaluation {label}: {' '.join(job) or '(the run config)'}", flush=True)
+                evaluate(run_dir, job, label)
     except KeyboardInterrupt:
         print("interrupted: finished evaluations are kept; run the same command again to resume", file=sys.stderr)
         sys.exit(EXIT_INTERRUPTED)
-    except (HydraException, *user_errors()) as error:
-        report_error(error)
-        sys.exit(EXIT_USER_ERROR)
-    except OSError as error:
-        if not disk_full(error):
-            raise
+    except HydraException as error:
         report_error(error)
         sys.exit(EXIT_USER_ERROR)
 

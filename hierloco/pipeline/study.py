@@ -24,7 +24,7 @@ import sys
 from pathlib import Path
 from typing import Callable, Sequence
 
-from hierloco.pipeline.errors import EXIT_INTERRUPTED, EXIT_USER_ERROR, ConfigError, user_errors
+from hierloco.pipeline.errors import EXIT_INTERRUPTED, EXIT_USER_ERROR, ConfigError
 from hierloco.pipeline.studies import Job, JobResult, report_failures, rows_of, run_jobs
 
 PAPER_TASKS = ("velocity_tracking", "goal_reaching", "trajectory_tracking")
@@ -38,22 +38,14 @@ def study_main(script_file: str, config_name: str = "config") -> Callable:
     folder = str(Path(script_file).resolve().parent)
 
     def decorate(main: Callable) -> Callable:
-        from hierloco.pipeline.entry import check_environment, disk_full, report_error, sigterm_as_interrupt
+        from hierloco.pipeline.entry import check_environment, one_line_errors, report_error, sigterm_as_interrupt
 
         @hydra.main(config_path=folder, config_name=config_name, version_base=None)
         @functools.wraps(main)
         def task(cfg):
-            try:
+            with one_line_errors():
                 check_environment()
                 return main(cfg)
-            except user_errors() as error:
-                report_error(error)
-                sys.exit(EXIT_USER_ERROR)
-            except OSError as error:
-                if not disk_full(error):
-                    raise
-                report_error(error)
-                sys.exit(EXIT_USER_ERROR)
 
         @functools.wraps(main)
         def entry():
@@ -75,6 +67,25 @@ def study_main(script_file: str, config_name: str = "config") -> Callable:
         return entry
 
     return decorate
+
+
+def study_robots(names, problems: list[str]) -> list:
+    """The robots a study names (registered names or YAML paths), each problem added to ``problems``."""
+    from hierloco.envs.robots import get_robot
+
+    robots = []
+    for name in names:
+        try:
+            robots.append(get_robot(name))
+        except (ValueError, OSError) as error:
+            problems.append(str(error))
+    return robots
+
+
+def seed_problems(seeds) -> list[str]:
+    """A problem per seed that is not an integer >= 0, and one when there are none."""
+    return [f"seed {s!r} is not an integer >= 0" for s in seeds if not (isinstance(s, int) and s >= 0)] + (
+        [] if list(seeds) else ["seeds is empty"])
 
 
 def run_study(cfg, jobs: Sequence[Job]) -> list[JobResult]:
@@ -143,4 +154,4 @@ def end_study(results: Sequence[JobResult]) -> None:
 
 
 __all__ = ["PAPER_TASKS", "ConfigError", "EXIT_INTERRUPTED", "end_study", "main_tasks", "missing_markdown",
-           "rows_of", "run_study", "study_main", "write_tables"]
+           "rows_of", "run_study", "seed_problems", "study_main", "study_robots", "write_tables"]

@@ -23,19 +23,14 @@ from hierloco.plots import plot_samples
 from hierloco.results import EPISODE_COLUMNS, csv_text, markdown_table
 from hierloco.pipeline import studies
 from hierloco.pipeline.config import ConfigError, SETTINGS, as_lists
-from hierloco.pipeline.study import end_study, main_tasks, run_study, study_main
+from hierloco.pipeline.study import end_study, main_tasks, run_study, seed_problems, study_main, study_robots
 
 def check(cfg) -> list:
-    from hierloco.envs.robots import get_robot
     from hierloco.envs.robots.profiles import PROFILES
 
     as_lists(cfg, ("robots", "seeds", "methods", "samples", "sample_methods", "overrides", "profiles"))
-    problems, robots = [], []
-    for robot in cfg.robots:
-        try:
-            robots.append(get_robot(robot))
-        except (ValueError, OSError) as error:
-            problems.append(str(error))
+    problems = []
+    robots = study_robots(cfg.robots, problems)
     for method in [*cfg.methods, *cfg.sample_methods]:
         try:
             studies.resolve_method(method, cfg.variants)

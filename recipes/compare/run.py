@@ -21,14 +21,14 @@ from omegaconf import OmegaConf
 from hierloco.io import write_text
 from hierloco.pipeline import studies
 from hierloco.pipeline.config import ConfigError, as_lists
-from hierloco.pipeline.study import end_study, main_tasks, rows_of, run_study, study_main, write_tables
+from hierloco.pipeline.study import (
+    end_study, main_tasks, rows_of, run_study, seed_problems, study_main, study_robots, write_tables,
+)
 from recipes.compare import paper_check
 
 
 def check(cfg) -> list:
     """The robots (resolved: names or YAML paths); raises one ConfigError naming every problem."""
-    from hierloco.envs.robots import get_robot
-
     as_lists(cfg, ("methods", "robots", "seeds", "settings", "adverse_methods", "overrides"))
     problems = []
     for method in cfg.methods:
@@ -36,17 +36,10 @@ def check(cfg) -> list:
             studies.resolve_method(method, cfg.variants)
         except ValueError as error:
             problems.append(str(error))
-    robots = []
-    for robot in cfg.robots:
-        try:
-            robots.append(get_robot(robot))
-        except (ValueError, OSError) as error:
-            problems.append(str(error))
+    robots = study_robots(cfg.robots, problems)
     problems += [f"unknown setting {s!r} (normal, legs_disabled)" for s in cfg.settings
                  if s not in ("normal", "legs_disabled")]
-    problems += [f"seed {s!r} is not an integer >= 0" for s in cfg.seeds if not (isinstance(s, int) and s >= 0)]
-    if not cfg.seeds:
-        problems.append("seeds is empty")
+    problems += seed_problems(cfg.seeds)
     for method, seeds in cfg.method_seeds.items():
         if method not in cfg.methods:
             problems.append(f"method_seeds names {method!r}, which is not in methods {list(cfg.methods)}")

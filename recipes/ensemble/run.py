@@ -21,22 +21,19 @@ import numpy as np
 from hierloco.io import write_text
 from hierloco.pipeline import studies
 from hierloco.pipeline.config import ConfigError, as_lists
-from hierloco.pipeline.study import end_study, main_tasks, rows_of, run_study, study_main, write_tables
+from hierloco.pipeline.study import (
+    end_study, main_tasks, rows_of, run_study, seed_problems, study_main, study_robots, write_tables,
+)
 
 
 def check(cfg) -> list:
     from hierloco.envs.faults import SETTINGS
-    from hierloco.envs.robots import get_robot
     from hierloco.envs.world_model import RISKS
 
     as_lists(cfg, ("robots", "seeds", "settings", "risks", "overrides"))
-    problems, robots = [], []
-    for robot in cfg.robots:
-        try:
-            robots.append(get_robot(robot))
-        except (ValueError, OSError) as error:
-            problems.append(str(error))
-    problems += [f"seed {s!r} is not an integer >= 0" for s in cfg.seeds if not (isinstance(s, int) and s >= 0)]
+    problems = []
+    robots = study_robots(cfg.robots, problems)
+    problems += seed_problems(cfg.seeds)
     problems += [f"unknown setting {s!r}" for s in cfg.settings if s not in SETTINGS]
     problems += [f"unknown risk {r!r} (risks: {', '.join(RISKS)})" for r in cfg.risks if r not in RISKS]
     if not (isinstance(cfg.members, int) and cfg.members >= 2):

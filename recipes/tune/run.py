@@ -24,16 +24,14 @@ from hierloco.io import write_text
 from hierloco.results import EPISODE_COLUMNS, csv_text
 from hierloco.pipeline import studies
 from hierloco.pipeline.config import ConfigError, as_lists
-from hierloco.pipeline.study import end_study, missing_markdown, run_study, study_main
+from hierloco.pipeline.study import end_study, missing_markdown, run_study, seed_problems, study_main, study_robots
 from recipes.compare.paper_check import seed_means
 
 
 def check(cfg) -> list:
     """The robots; raises one ConfigError naming every problem."""
-    from hierloco.envs.robots import get_robot
-
     as_lists(cfg, ("robots", "seeds", "tasks", "overrides", "reuse_stages"))
-    problems, robots = [], []
+    problems = []
     if not (Path(__file__).resolve().parents[1] / cfg.method / "train.py").exists():
         problems.append(f"unknown method {cfg.method!r}: no recipes/{cfg.method}/train.py")
     if not cfg.candidates:
@@ -42,12 +40,8 @@ def check(cfg) -> list:
         unknown = set(candidate) - {"overrides", "reuse", "reuse_stages"}
         if unknown:
             problems.append(f"candidate {name!r}: unknown keys {sorted(unknown)} (overrides, reuse, reuse_stages)")
-    for robot in cfg.robots:
-        try:
-            robots.append(get_robot(robot))
-        except (ValueError, OSError) as error:
-            problems.append(str(error))
-    problems += [f"seed {s!r} is not an integer >= 0" for s in cfg.seeds if not (isinstance(s, int) and s >= 0)]
+    robots = study_robots(cfg.robots, problems)
+    problems += seed_problems(cfg.seeds)
     if not cfg.tasks:
         problems.append("tasks is empty")
     if problems:
