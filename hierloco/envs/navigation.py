@@ -77,6 +77,33 @@ def clearance(arena: Arena, points: np.ndarray) -> np.ndarray:
     return np.min([_box_distance(o, points) for o in arena.obstacles], axis=0)
 
 
+FOOTPRINT_MARGIN = 0.1  # m kept beyond the robot's footprint radius by the default inflation
+
+
+def footprint_radius(robot) -> float:
+    """The robot's footprint radius in m: the largest horizontal distance from its base to a foot in the standing
+    pose (A1 about 0.24 m, Daisy about 0.55 m). A path inflated by this plus :data:`FOOTPRINT_MARGIN` keeps the feet,
+    not only the CoM, clear of the obstacles.
+
+    Example:
+        >>> round(footprint_radius("daisy"), 2) > round(footprint_radius("a1"), 2)
+        True
+    """
+    import mujoco
+
+    from hierloco.envs.robots import compile_model, get_robot
+    from hierloco.envs.robots.spec import standing_qpos
+
+    robot = get_robot(robot)
+    model = compile_model(robot)
+    data = mujoco.MjData(model)
+    data.qpos[:] = standing_qpos(model, robot, yaw=0.0)
+    mujoco.mj_kinematics(model, data)
+    feet = np.array([data.site_xpos[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, leg.foot_site)]
+                     for leg in robot.legs])
+    return float(np.max(np.linalg.norm(feet[:, :2] - data.qpos[:2], axis=1)))
+
+
 def plan_path(arena: Arena, *, inflation: float = 0.35, resolution: float = 0.05, spacing: float = 0.05
               ) -> np.ndarray:
     """A collision-free path from start to goal (``P x 2``, m) keeping ``inflation`` m from every obstacle.

@@ -21,7 +21,9 @@ from hierloco.pipeline.config import ConfigError  # noqa: E402
 from hierloco.pipeline.study import study_main  # noqa: E402
 from hierloco.components.evaluation import run_task  # noqa: E402
 from hierloco.envs.latent_env import LatentActionEnv  # noqa: E402
-from hierloco.envs.navigation import clearance, cluttered_arena, plan_path  # noqa: E402
+from hierloco.envs.navigation import (  # noqa: E402
+    FOOTPRINT_MARGIN, clearance, cluttered_arena, footprint_radius, plan_path,
+)
 from hierloco.envs.robots import get_robot  # noqa: E402
 from hierloco.envs.tasks import TrajectoryTracking  # noqa: E402
 from hierloco.io import write_text  # noqa: E402
@@ -30,23 +32,27 @@ from hierloco.trained import load_run  # noqa: E402
 from hierloco.render import render_frames, save_video  # noqa: E402
 
 
-def validate(cfg: DictConfig) -> None:
+def validate(cfg: DictConfig) -> float:
+    """Checks the config; returns the inflation in m (by default from the robot's footprint)."""
     problems = []
+    inflation = None
     try:
-        get_robot(cfg.robot)
+        robot = get_robot(cfg.robot)
+        inflation = footprint_radius(robot) + FOOTPRINT_MARGIN if cfg.inflation is None else cfg.inflation
     except (ValueError, OSError) as error:
         problems.append(str(error))
-    if not (cfg.inflation >= 0 and cfg.speed > 0 and cfg.arena.num_obstacles >= 0):
-        problems.append("need inflation >= 0 m, speed > 0 m/s and arena.num_obstacles >= 0")
+    if not ((inflation is None or inflation >= 0) and cfg.speed > 0 and cfg.arena.num_obstacles >= 0):
+        problems.append("need inflation >= 0 m (or null), speed > 0 m/s and arena.num_obstacles >= 0")
     if problems:
         raise ConfigError("bad config: " + "; ".join(problems))
+    return inflation
 
 
 @study_main(__file__)
 def main(cfg: DictConfig) -> None:
-    validate(cfg)
+    inflation = validate(cfg)
     arena = cluttered_arena(seed=cfg.arena.seed, num_obstacles=cfg.arena.num_obstacles, goal=tuple(cfg.arena.goal))
-    path = plan_path(arena, inflation=cfg.inflation)  # before any training: an impossible arena fails fast
+    path = plan_path(arena, inflation=inflation)  # before any training: an impossible arena fails fast
     lat_dir = Path(cfg.lat_run_dir)
     studies.run_here(studies.Job("lat", str(lat_dir), [f"preset={cfg.lat_preset}", f"robot={cfg.robot}",
                                                        f"seed={cfg.seed}", f"progress={str(cfg.progress).lower()}"]))
@@ -60,7 +66,7 @@ def main(cfg: DictConfig) -> None:
     env.close()
     com = rollout.com_paths[0, :, :2]
     result = {"robot": cfg.robot, "seed": cfg.seed, "arena_seed": cfg.arena.seed,
-              "num_obstacles": len(arena.obstacles), "path_length": task.length,
+              "num_obstacles": len(arena.obstacles), "inflation": inflation, "path_length": task.length,
               "normalized_cost": float(rollout.result.normalized_cost[0]),
               "mean_path_distance": float(rollout.metrics["path_distance"][0]),
               "final_distance_to_goal": float(np.linalg.norm(com[-1] - np.asarray(arena.goal))),
@@ -69,7 +75,7 @@ def main(cfg: DictConfig) -> None:
               "min_com_clearance": float(clearance(arena, com).min()), "fell": bool(rollout.fell[0])}
     out = Path(cfg.out_dir)
     write_text(out / "navigation.json", json.dumps(result, indent=2))
-    plot_navigation(arena, path, com, out / "navigation.png", inflation=cfg.inflation,
+    plot_navigation(arena, path, com, out / "navigation.png", inflation=inflation,
                     title=f"LAT {cfg.robot}: navigation (arena {cfg.arena.seed})")
     from hierloco import render_backend
 
