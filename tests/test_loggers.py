@@ -218,6 +218,11 @@ def test_wandb_offline_never_touches_the_network(tmp_path, wandb_home, monkeypat
     logger.log_video("eval/normal/goal_reaching/video", np.zeros((6, 16, 16, 3), np.uint8), fps=20)
     with pytest.raises(ValueError, match="T x H x W x 3 uint8"):
         logger.log_video("eval/normal/goal_reaching/video", np.zeros((6, 16, 16), np.uint8))
+    checkpoint = tmp_path / "gait_policy.pt"
+    checkpoint.write_bytes(b"weights")
+    assert logger.log_artifact([checkpoint], "a1_seed0-run", "hierloco-run", {"gait_policy": "abc"})
+    identity = logger.wandb_run
+    assert identity["mode"] == "offline" and identity["group"] == "lat/a1/tiny" and identity["id"]
     logger.close()
     assert connections() == 0
     assert "WANDB_MODE" not in os.environ  # TorchRL's process-wide switch does not leak into later loggers
@@ -226,7 +231,8 @@ def test_wandb_offline_never_touches_the_network(tmp_path, wandb_home, monkeypat
     record = next(runs[0].glob("run-*.wandb")).read_bytes()
     for text in ("eval/normal/goal_reaching_1p5m/normalized_cost", "eval/normal/goal_reaching_1p5m/step",
                  "train/dynamics/heldout_loss", "train/dynamics/epoch", "figures/latent_map", "eval/episodes",
-                 "eval/success_rate", "lat/a1/tiny", "tiny", logger.exp_name):
+                 "eval/success_rate", "lat/a1/tiny", "tiny", logger.exp_name, "a1_seed0-run", "hierloco-run",
+                 identity["id"]):
         assert text.encode() in record, text
     assert b"goal_reaching_1.5m" not in record
     assert list(runs[0].glob("files/media/videos/eval/normal/goal_reaching/video_*.mp4"))
@@ -287,3 +293,23 @@ def test_wandb_online_with_a_server_that_never_answers(tmp_path, wandb_home, loo
     seconds, backends, experiment_dir, stderr = _run_online(tmp_path, wandb_home, base_url=url)
     _check_fallback(seconds, backends, experiment_dir, stderr, reason="could not start")
     assert connections() >= 1  # it did try this server, and only this one
+
+
+def test_a_recipe_run_records_its_wandb_run_and_logs_its_checkpoints(copy_run, wandb_home):
+    """run.json names the wandb run (offline here) the run logged to, and the run's checkpoints go to it as one
+    ``hierloco-run`` artifact; the CoM model's training loss is logged beside its held-out loss."""
+    import json
+
+    from tests.runner import run_in_process
+
+    for stale in copy_run.glob("dynamics_model_normal.pt*"):  # trained again, so its curves are logged
+        stale.unlink()
+    result = run_in_process("lat", "preset=tiny", "progress=false", f"run_dir={copy_run}", "eval.videos=[]",
+                            "logger.backends=[csv,wandb]", env={"WANDB_MODE": "offline"})
+    assert result.returncode == 0, result.stderr[-3000:]
+    identity = json.loads((copy_run / "run.json").read_text())["wandb"]
+    assert identity["mode"] == "offline" and identity["group"] == "lat/a1/tiny"
+    [record] = [p for p in (copy_run / "logs").rglob(f"run-{identity['id']}.wandb")]
+    content = record.read_bytes()
+    assert f"{copy_run.name}-run".encode() in content and b"hierloco-run" in content  # the checkpoints artifact
+    assert b"train/dynamics_normal/train_loss" in content and b"train/dynamics_normal/heldout_loss" in content

@@ -390,7 +390,7 @@ def train_com_model(
     Returns:
         The model (eval mode) and a report in ``metadata``: ``heldout_rmse`` and ``constant_velocity_rmse`` (5 each,
         physical units, order dx, dy, dyaw, vx', vy'; the baseline predicts ``(dx, dy) = v * duration``,
-        ``dyaw = 0``, ``v' = v``), ``heldout_loss`` (best standardised MSE) with its ``heldout_loss_history`` per
+        ``dyaw = 0``, ``v' = v``), ``heldout_loss`` (best standardised MSE) with its ``heldout_loss_history`` (and ``train_loss_history``) per
         epoch, ``epochs``, ``best_epoch`` (1-based), ``train_seconds``, ``num_train``, ``num_heldout``, ``seed``.
 
     Raises:
@@ -455,14 +455,18 @@ def train_com_model(
     start = time.perf_counter()
     bar = tqdm(range(1, int(max_epochs) + 1), desc="CoM model", disable=not progress)
     model.train()
+    train_history = []  # the mean training loss of each epoch (over its batches)
     for epoch in bar:
         order = model.epoch_order(rows, len(train_x), generator).to(device)
+        losses = []
         for begin in range(0, order.shape[-1], batch_size):
             idx = order[..., begin:begin + batch_size]
             loss = model.training_loss(train_x[idx], train_y[idx])
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             optimizer.step()
+            losses.append(loss.detach())
+        train_history.append(float(torch.stack(losses).mean()))
         history.append(heldout_loss())
         if history[-1] < best_loss:
             best_loss, best_epoch = history[-1], epoch
@@ -484,7 +488,7 @@ def train_com_model(
         "heldout_rmse": ((prediction - target) ** 2).mean(0).sqrt().tolist(),
         "constant_velocity_rmse": ((baseline - target) ** 2).mean(0).sqrt().tolist(),
         "output_names": list(OUTPUT_NAMES),
-        "heldout_loss": best_loss, "heldout_loss_history": history,
+        "heldout_loss": best_loss, "heldout_loss_history": history, "train_loss_history": train_history,
         "epochs": len(history), "best_epoch": best_epoch, "train_seconds": train_seconds,
         "num_train": len(train_idx), "num_heldout": len(heldout_idx), "seed": int(seed),
         "action_dim": int(act.shape[1]), "hidden": int(hidden), "lr": float(lr), "batch_size": int(batch_size),

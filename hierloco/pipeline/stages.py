@@ -199,8 +199,9 @@ def build_dynamics_model(run, params, data: TransitionData, low_level) -> Traine
     features = low_level.action_features(data.action)
     model = train_com_model(data.com_state, features, data.next_com_state, progress=run.progress, **params)
     setting = run.current.removeprefix("dynamics_model_")
-    history = model.metadata["heldout_loss_history"]
-    run.logger.log_curve(f"train/dynamics_{setting}", {"heldout_loss": history}, step_name="epoch")
+    curves = {"heldout_loss": model.metadata["heldout_loss_history"],
+              "train_loss": model.metadata["train_loss_history"]}
+    run.logger.log_curve(f"train/dynamics_{setting}", curves, step_name="epoch")
     return model
 
 
