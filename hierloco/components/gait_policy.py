@@ -136,11 +136,16 @@ def train_gait_policy(
     seed: int = 0,
     device: str = "cpu",
     progress: bool = True,
+    init: TrainedGaitPolicy | None = None,
 ) -> TrainedGaitPolicy:
     """Fits ``pi`` and one latent per expert to ``G x N x J`` expert joint targets (rad).
 
     Returns the trained policy, the ``G x Z`` latents, the latent box they span, and a report in ``metadata``:
     ``rmse_per_joint`` (rad), ``rmse``, the training time and ``loss_history`` (the mean standardised MSE per epoch).
+
+    ``init`` continues a fit of the same experts: its weights, normalisation and latents are the starting point
+    (its network's shape wins over ``latent_dim``, ``hidden`` and ``num_harmonics``), and ``epochs`` more are run
+    with a fresh cosine cycle from ``lr`` (a warm restart); ``metadata["epochs"]`` counts all of them.
     """
     targets = torch.as_tensor(np.asarray(joint_targets), dtype=torch.float32)
     if targets.ndim != 3:
@@ -148,11 +153,21 @@ def train_gait_policy(
     num_experts, steps, joints = targets.shape
     generator = torch.Generator().manual_seed(seed)
     torch.manual_seed(seed)
-    mean = targets.reshape(-1, joints).mean(0)
-    std = targets.reshape(-1, joints).std(0).clamp_min(1e-3)
-    policy = LatentGaitPolicy(joints, latent_dim, steps_per_action=steps, periods_per_action=periods_per_action,
-                              num_harmonics=num_harmonics, hidden=hidden, joint_mean=mean, joint_std=std).to(device)
-    latents = nn.Parameter(0.1 * torch.randn(num_experts, latent_dim, generator=generator).to(device))
+    if init is None:
+        mean = targets.reshape(-1, joints).mean(0)
+        std = targets.reshape(-1, joints).std(0).clamp_min(1e-3)
+        policy = LatentGaitPolicy(joints, latent_dim, steps_per_action=steps, periods_per_action=periods_per_action,
+                                  num_harmonics=num_harmonics, hidden=hidden, joint_mean=mean,
+                                  joint_std=std).to(device)
+        latents = nn.Parameter(0.1 * torch.randn(num_experts, latent_dim, generator=generator).to(device))
+    else:
+        if tuple(init.latents.shape) != (num_experts, init.policy.latent_dim) or init.policy.num_joints != joints:
+            raise ValueError(f"init was fitted to {tuple(init.latents.shape)[0]} experts of "
+                             f"{init.policy.num_joints} joints, not these {num_experts} x {joints}")
+        policy = LatentGaitPolicy(**init.policy.config()).to(device)
+        policy.load_state_dict(init.policy.state_dict())
+        mean, std = policy.joint_mean.cpu(), policy.joint_std.cpu()
+        latents = nn.Parameter(init.latents.clone().float().to(device))
     policy_optim = torch.optim.Adam(policy.parameters(), lr=lr)
     latent_optim = torch.optim.Adam([latents], lr=latent_lr, weight_decay=latent_weight_decay)
 
@@ -186,4 +201,155 @@ def train_gait_policy(
     metadata = {"rmse_per_joint": rmse_per_joint.tolist(), "rmse": float(((reconstruction - targets) ** 2).mean().sqrt()),
                 "train_seconds": time.perf_counter() - start, "num_experts": num_experts, "epochs": epochs,
                 "seed": seed, "loss_history": loss_history}
+    if init is not None:
+        metadata["epochs"] = epochs + int(init.metadata.get("epochs", 0))
+        metadata["train_seconds"] += float(init.metadata.get("train_seconds", 0.0))
+        metadata["loss_history"] = list(init.metadata.get("loss_history", [])) + loss_history
     return TrainedGaitPolicy(policy.cpu(), z, z.min(0).values, z.max(0).values, metadata)
+
+
+# ---------------------------------------------------------------------------------------------------- adaptive fit
+ADAPTIVE_STEPS = ("as configured", "longer", "wider", "lower learning rate")
+
+
+@dataclass
+class GaitPolicyFit:
+    """A gait policy fitted until it reproduces its experts in simulation (:func:`fit_gait_policy`).
+
+    Attributes:
+        trained: the fit kept (the first that reaches the bar, else the one that reproduces most).
+        check: its :func:`hierloco.components.evaluation.check_gait_policy` result.
+        attempts: every fit tried, in order: ``name``, ``epochs`` (in total), ``hidden``, ``num_harmonics``,
+            ``lr``, ``continued`` (from the fit before), ``reproduced_fraction``, ``rmse`` and ``seconds``.
+        min_reproduced_fraction: the bar.
+    """
+
+    trained: TrainedGaitPolicy
+    check: dict
+    attempts: list[dict]
+    min_reproduced_fraction: float
+    experts_replayed_fraction: float | None = None
+
+    @property
+    def limited_by_experts(self) -> bool:
+        """The experts' own targets, replayed open loop, reproduce fewer than the bar: no fit can reach it."""
+        return self.experts_replayed_fraction is not None and \
+            self.experts_replayed_fraction < self.min_reproduced_fraction
+
+    @property
+    def reproduced_fraction(self) -> float:
+        return float(self.check["reproduced_fraction"])
+
+    @property
+    def ok(self) -> bool:
+        return self.reproduced_fraction >= self.min_reproduced_fraction
+
+
+def fit_gait_policy(
+    library,
+    *,
+    robot=None,
+    min_reproduced_fraction: float = 0.8,
+    adaptive: bool = True,
+    budget_epochs: int | None = None,
+    budget_seconds: float | None = None,
+    check_pairs: int = 50,
+    check_actions: int = 4,
+    periods_per_action: int | None = None,
+    progress: bool = False,
+    **train_kwargs,
+) -> GaitPolicyFit:
+    """Trains the gait policy on ``library``'s experts, checks it in simulation, and when it reproduces fewer
+    than ``min_reproduced_fraction`` of them, adapts the training before giving up (Li et al., Sec. III-B: pi(., z_g)
+    must walk like expert g).
+
+    The ladder, stopping at the first fit that reaches the bar:
+
+    1. ``"as configured"``: :func:`train_gait_policy` with ``train_kwargs`` (what the pipeline trains without this
+       function; with ``adaptive=False`` that is all);
+    2. ``"longer"``: that fit trained for as many epochs again (a warm restart of the cosine schedule);
+    3. ``"wider"``: twice the hidden units and twice the phase harmonics (up to the Nyquist limit: short swing
+       phases in long periods need them), from scratch, twice the epochs;
+    4. ``"lower learning rate"``: the wider fit trained again as long at a third of the learning rate.
+
+    A step runs only while its epochs fit in ``budget_epochs`` (all fits together; deterministic: the choice for
+    a cached pipeline stage) and its estimated time in ``budget_seconds`` (from the first fit's speed). Before
+    adapting, the experts' own targets are replayed open loop
+    (:func:`hierloco.components.evaluation.replayed_fraction`): when they reproduce fewer than the bar, no fit can
+    reach it and the ladder stops there (``limited_by_experts``: the experts need other parameters,
+    ``hierloco-robot-check``).
+
+    Args:
+        library: a :class:`hierloco.components.expert_library.ExpertLibrary`.
+        robot: its robot (default: the library's).
+        periods_per_action: gait periods per action (default: from the robot's gait period).
+        check_pairs, check_actions: :func:`hierloco.components.evaluation.check_gait_policy`'s ``num_pairs`` and
+            ``num_actions``.
+        **train_kwargs: :func:`train_gait_policy`'s keyword arguments (``epochs``, ``hidden``, ``lr``, ``seed``...).
+
+    Example:
+        >>> from hierloco.components.expert_library import build_expert_library
+        >>> library = build_expert_library("daisy", 4, settle_time=1.0, progress=False)  # doctest: +SKIP
+        >>> fit = fit_gait_policy(library, epochs=50, hidden=64, budget_epochs=300)  # doctest: +SKIP
+        >>> [a["name"] for a in fit.attempts], fit.ok  # doctest: +SKIP
+        (['as configured'], True)
+    """
+    from hierloco.components.evaluation import check_gait_policy, replayed_fraction
+    from hierloco.components.low_level import LatentLowLevel
+    from hierloco.envs.locomotion import periods_per_action as gait_periods
+    from hierloco.envs.robots import get_robot
+
+    robot = get_robot(robot if robot is not None else library.robot)
+    if periods_per_action is None:
+        periods_per_action = gait_periods(robot, library.steps_per_action)
+    epochs = int(train_kwargs.pop("epochs", 400))
+    hidden = int(train_kwargs.pop("hidden", 512))
+    harmonics = int(train_kwargs.pop("num_harmonics", 8))
+    lr = float(train_kwargs.pop("lr", 1e-3))
+    seed = int(train_kwargs.get("seed", 0))
+    nyquist = max(1, (library.steps_per_action // periods_per_action) // 2)
+    plan = [("as configured", dict(epochs=epochs, hidden=hidden, num_harmonics=harmonics, lr=lr), False)]
+    if adaptive:
+        wide = dict(hidden=2 * hidden, num_harmonics=min(2 * harmonics, nyquist))
+        plan += [("longer", dict(epochs=epochs, hidden=hidden, num_harmonics=harmonics, lr=lr), True),
+                 ("wider", dict(epochs=2 * epochs, lr=lr, **wide), False),
+                 ("lower learning rate", dict(epochs=2 * epochs, lr=lr / 3, **wide), True)]
+    start = time.perf_counter()
+    attempts, fits, spent_epochs, seconds_per_unit = [], [], 0, None
+    previous, ceiling = None, None
+    for name, options, continued in plan:
+        if attempts and ceiling is None:
+            ceiling = replayed_fraction(library, robot=robot, num_actions=check_actions, seed=seed)
+            if ceiling < min_reproduced_fraction:
+                break
+        cost = options["epochs"] * (options["hidden"] / hidden) ** 2  # in epochs of the configured width
+        if attempts and budget_epochs is not None and spent_epochs + options["epochs"] > budget_epochs:
+            break
+        if attempts and budget_seconds is not None and \
+                time.perf_counter() - start + cost * seconds_per_unit > budget_seconds:
+            break
+        tic = time.perf_counter()
+        trained = train_gait_policy(library.joint_targets, periods_per_action=periods_per_action, progress=progress,
+                                    init=previous if continued else None, **options, **train_kwargs)
+        check = check_gait_policy(LatentLowLevel(trained, robot), library, trained.latents.numpy(),
+                                  num_pairs=check_pairs, num_actions=check_actions, seed=seed)
+        seconds = time.perf_counter() - tic
+        if seconds_per_unit is None:
+            seconds_per_unit = seconds / max(cost, 1)
+        spent_epochs += options["epochs"]
+        attempts.append({"name": name, "epochs": int(trained.metadata["epochs"]), "hidden": trained.policy.hidden,
+                         "num_harmonics": trained.policy.num_harmonics, "lr": options["lr"], "continued": continued,
+                         "reproduced_fraction": float(check["reproduced_fraction"]),
+                         "rmse": float(trained.metadata["rmse"]), "seconds": seconds})
+        fits.append((trained, check))
+        previous = trained
+        if check["reproduced_fraction"] >= min_reproduced_fraction:
+            break
+    best = next((i for i, (_, c) in enumerate(fits) if c["reproduced_fraction"] >= min_reproduced_fraction),
+                max(range(len(fits)), key=lambda i: fits[i][1]["reproduced_fraction"]))
+    trained, check = fits[best]
+    trained.metadata["adaptive_fit"] = {"attempts": attempts, "kept": attempts[best]["name"],
+                                        "min_reproduced_fraction": float(min_reproduced_fraction),
+                                        "experts_replayed_fraction": ceiling}
+    return GaitPolicyFit(trained=trained, check=check, attempts=attempts,
+                         min_reproduced_fraction=float(min_reproduced_fraction), experts_replayed_fraction=ceiling)
