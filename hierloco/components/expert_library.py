@@ -484,16 +484,16 @@ def _span(values) -> str:
 
 def _advice(robot: RobotSpec | None, steps_per_action: int) -> tuple[str, ...]:
     if robot is None:
-        return ("a longer gait_period", "stiffer kp and more joint_damping",
+        return ("another gait_period (hierloco-robot-check searches it)", "stiffer kp and more joint_damping",
                 "a standing_height that puts the feet on the floor", "a smaller command box")
     periods = admissible_gait_periods(len(robot.gait_groups), steps_per_action)
     derived = derive_gait_period(robot, steps_per_action) if periods else None
-    longer = [p for p in periods if p > robot.gait_period]
     hint = f"; the size rule gives {derived} s (derive_gait_period)" if derived is not None else ""
     kp, damping = (_span(values) for values in (robot.kp, robot.joint_damping))
     return (
-        f"gait_period (now {robot.gait_period} s): longer stances let the legs carry the body{hint}; periods that "
-        f"fit {steps_per_action}-step actions: {', '.join(f'{p:g}' for p in longer) or 'none longer'} s",
+        f"gait_period (now {robot.gait_period} s): a trot balances on short stances, a statically stable gait "
+        f"(a tripod) walks well with long ones{hint}; periods that fit {steps_per_action}-step actions: "
+        f"{', '.join(f'{p:g}' for p in periods) or 'none'} s",
         f"kp (now {kp} N m/rad) and joint_damping (now {damping} N m s/rad): stiffer, better damped servos sag and "
         "slip less under the body's weight",
         f"standing_height (now {robot.standing_height:.3f} m; the feet touch the floor at "

@@ -17,7 +17,9 @@ for a latent gait policy that reproduces them in simulation (:func:`hierloco.com
 2. **verification** of the best candidates, in order, while the budget lasts: the expert library exactly as the
    experts stage builds it, its tracking check, and a gait policy trained and checked in simulation
    (:func:`hierloco.components.gait_policy.fit_gait_policy`, which adapts the training when the first fit falls
-   short of the bar).
+   short of the bar). The first candidate whose gait policy passes as configured is the one found; when only an
+   adapted fit passes, the next candidates are verified too, and failing a better one, the adapted fit's training
+   (epochs, width) is part of what is found.
 
 Example:
     >>> from hierloco.envs.robots import get_robot
@@ -466,6 +468,14 @@ class Verification:
     def ok(self) -> bool:
         return not self.problem
 
+    @property
+    def policy_adapted(self) -> dict | None:
+        """The gait-policy fit that reached the bar when the configured one did not (its ``epochs``, ``hidden``,
+        ``num_harmonics``, ``lr``: what the recipe's ``policy`` section needs), else ``None``."""
+        if not self.ok or len(self.policy_attempts) < 2:
+            return None
+        return self.policy_attempts[-1]
+
 
 @dataclass
 class TuningResult:
@@ -491,14 +501,16 @@ class TuningResult:
     @property
     def params(self) -> ExpertParameters | None:
         """The parameters found (the verified candidate's), else the best screened."""
-        for verification in self.verifications:
-            if verification.ok:
-                return verification.candidate.params
+        if self.verified is not None:
+            return self.verified.candidate.params
         return self.best.candidate.params if self.best is not None else None
 
     @property
     def verified(self) -> Verification | None:
-        return next((v for v in self.verifications if v.ok), None)
+        """The candidate found: the first verified whose gait policy passes as configured, else the first whose
+        adapted fit passes."""
+        passing = [v for v in self.verifications if v.ok]
+        return next((v for v in passing if v.policy_adapted is None), passing[0] if passing else None)
 
 
 def tune_expert_parameters(
@@ -582,8 +594,8 @@ def tune_expert_parameters(
                                             min_reproduced_fraction=min_reproduced_fraction, seed=seed,
                                             budget_seconds=left(), log=log)
             verifications.append(verification)
-            if verification.ok:
-                break
+            if verification.ok and verification.policy_adapted is None:
+                break  # else look on, while the budget lasts, for one the configured training reproduces
     found = any(v.ok for v in verifications) if verify else bool(best is not None and best.passes)
     limits = [] if found else _limits(best, verifications)
     return TuningResult(robot=robot, reference=reference, found=found, best=best, verifications=verifications,

@@ -43,6 +43,7 @@ MIN_FOOT_DROP = 0.25  # a foot below its hip by at least this fraction of the le
 FOOT_DROP_SUGGESTED = 0.6  # the suggested pose puts the feet this fraction of the reach below the hips
 FLOOR_TOLERANCE = 0.01  # m: a foot on the floor has its bottom within this of the floor (standing pose)
 MAX_STATIC_TORQUE = 0.75  # static torque holding the robot on its stance legs, as a fraction of the torque limit
+MAX_STATIC_SAG = 0.25  # rad: a servo holding that torque is off its target by torque / kp, at most this
 LIMIT_MARGIN = 1e-6  # rad
 
 
@@ -58,6 +59,8 @@ class LegStatics:
         reach: m, the leg's length: the distances from joint to joint and from the last joint to the foot, summed.
         static_torque: N m per joint of the leg, holding its share of the weight (see :class:`StandingStatics`).
         torque_limit: N m per joint (``inf`` for a motor without one).
+        kp: N m / rad per joint, the servos' stiffness (a servo holding ``static_torque`` is off its target by
+            ``static_torque / kp``).
     """
 
     leg: str
@@ -67,6 +70,7 @@ class LegStatics:
     reach: float
     static_torque: tuple[float, ...]
     torque_limit: tuple[float, ...]
+    kp: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -125,7 +129,8 @@ def standing_statics(robot: RobotSpec, model: mujoco.MjModel | None = None) -> S
         legs.append(LegStatics(leg=leg.name, hip_height=float(anchors[0, 2]), foot_height=float(bottom),
                                foot_drop=float(anchors[0, 2] - foot[2]), reach=reach,
                                static_torque=tuple(float(t) for t in torque),
-                               torque_limit=tuple(float(t) for t in limits[start:start + n])))
+                               torque_limit=tuple(float(t) for t in limits[start:start + n]),
+                               kp=tuple(float(k) for k in model.actuator_gainprm[start:start + n, 0])))
         start += n
     derived = float(robot.standing_height) - min(bottoms)
     return StandingStatics(robot=robot.name, mass=mass, standing_height=float(robot.standing_height),
@@ -193,7 +198,8 @@ def description_problems(robot: RobotSpec) -> list[str]:
       nor lift a foot);
     - every foot touches the floor at the standing height (within ``FLOOR_TOLERANCE``);
     - standing on the fewest legs the gait keeps in stance, no joint needs more than ``MAX_STATIC_TORQUE`` of its
-      torque limit to hold the weight (walking adds to it).
+      torque limit to hold the weight (walking adds to it), nor sags more than ``MAX_STATIC_SAG`` under it (a servo
+      of gain kp is off its target by torque / kp).
 
     Example:
         >>> from hierloco.envs.robots import get_robot
@@ -262,6 +268,19 @@ def description_problems(robot: RobotSpec) -> list[str]:
             f"{limit:.1f} N m limit ({len(overloaded)} joints above {MAX_STATIC_TORQUE:.0%}; walking needs more): give "
             f"torque_limit of at least {torque / MAX_STATIC_TORQUE:.1f} N m for it, a lighter robot, or a pose "
             "with the feet closer under the joints")
+    sagging = []
+    for leg in statics.legs:
+        names = next(l.joints for l in robot.legs if l.name == leg.leg)
+        for name, torque, kp in zip(names, leg.static_torque, leg.kp):
+            if kp > 0 and torque / kp > MAX_STATIC_SAG:
+                sagging.append((torque / kp, name, torque, kp))
+    if sagging:
+        sag, name, torque, kp = max(sagging)
+        problems.append(
+            f"kp: holding {statics.mass:.1f} kg on {statics.stance_legs} stance legs, joint {name!r} sags "
+            f"{sag:.2f} rad off its target ({torque:.1f} N m at kp {kp:g} N m/rad; {len(sagging)} joints over "
+            f"{MAX_STATIC_SAG} rad): give kp of at least {torque / (0.5 * MAX_STATIC_SAG):.0f} N m/rad (a sag of "
+            f"{0.5 * MAX_STATIC_SAG} rad)")
     return problems
 
 
@@ -277,10 +296,12 @@ def description_summary(robot: RobotSpec) -> str:
     drop = min(leg.foot_drop / leg.reach for leg in statics.legs)
     ratio = max((t / limit for leg in statics.legs for t, limit in zip(leg.static_torque, leg.torque_limit)),
                 default=0.0)
+    sag = max((t / kp for leg in statics.legs for t, kp in zip(leg.static_torque, leg.kp) if kp > 0), default=0.0)
     return (f"standing pose inside the joint limits; feet {min(leg.foot_drop for leg in statics.legs):.3f} m or more "
             f"below the hips ({drop:.0%} of the reach, need {MIN_FOOT_DROP:.0%}) and on the floor; holding "
             f"{statics.mass:.1f} kg on {statics.stance_legs} stance legs takes at most {ratio:.0%} of a joint's torque "
-            f"limit (need {MAX_STATIC_TORQUE:.0%} or less)")
+            f"limit (need {MAX_STATIC_TORQUE:.0%} or less) and the servos sag {sag:.2f} rad at most (need "
+            f"{MAX_STATIC_SAG} or less)")
 
 
 def tracking_table(axes) -> list[str]:
@@ -289,7 +310,7 @@ def tracking_table(axes) -> list[str]:
              " ok |", "|---|---|---|---|---|---|"]
     for a in axes:
         lines.append(f"| {a.axis} ({a.unit}) | {a.command_low:+.2f} .. {a.command_high:+.2f} | {a.achieved_low:+.2f} .."
-                     f" {a.achieved_high:+.2f} | {a.slope:.2f} x {a.offset:+.3f} | {a.reach_low:.0%} / "
+                     f" {a.achieved_high:+.2f} | {a.slope:.2f} x command {a.offset:+.3f} | {a.reach_low:.0%} / "
                      f"{a.reach_high:.0%} (need {a.min_reach:.0%}) | {'yes' if a.ok else 'no'} |")
     return lines
 
@@ -381,8 +402,17 @@ def main(argv=None) -> int:
     lines = params.yaml_lines(robot, only=changed)
     if result.found:
         what = "verified" if verified is not None else "screened only (--no-verify)"
-        print(f"\nfound in {result.seconds:.0f} s ({what}); paste into {where} (replacing these keys):")
+        same = "" if set(changed) - {"standing_height", "gait_period"} else (
+            "; the description's own parameters walk, these lines pin the derived values")
+        print(f"\nfound in {result.seconds:.0f} s ({what}{same}); paste into {where} (replacing these keys):")
         print("\n".join(lines))
+        adapted = verified.policy_adapted if verified is not None else None
+        if adapted is not None:
+            print(f"note: the gait policy reached the bar only with its adapted '{adapted['name']}' fit "
+                  f"({adapted['epochs']} epochs in all, {adapted['hidden']} units, {adapted['num_harmonics']} "
+                  f"harmonics; the configured {args.epochs} epochs of {args.hidden} units reproduce "
+                  f"{verified.policy_attempts[0]['reproduced_fraction']:.0%}): train it adaptively "
+                  "(hierloco.components.gait_policy.fit_gait_policy), or longer (policy.epochs, not verified here)")
         return EXIT_FOUND
     print(f"\nnot found in {result.seconds:.0f} s; the best candidate: {result.best.candidate.label}")
     print("what limits it:")
@@ -393,7 +423,8 @@ def main(argv=None) -> int:
     return EXIT_NOT_FOUND
 
 
-__all__ = ["EXIT_FOUND", "EXIT_NOT_FOUND", "FLOOR_TOLERANCE", "LegStatics", "MAX_STATIC_TORQUE", "MIN_FOOT_DROP",
+__all__ = ["EXIT_FOUND", "EXIT_NOT_FOUND", "FLOOR_TOLERANCE", "LegStatics", "MAX_STATIC_SAG", "MAX_STATIC_TORQUE",
+           "MIN_FOOT_DROP",
            "StandingStatics", "description_problems", "description_summary", "main", "standing_statics",
            "suggested_standing_pose", "tracking_table"]
 

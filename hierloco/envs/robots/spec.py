@@ -58,6 +58,7 @@ LOCK_PREFIX = "lock_"
 MIN_LEGS = 3
 MIN_SWING_STEPS = 2  # control steps per swing phase, at least
 STATIC_STANCE_LEGS = 3  # a gait with at least this many legs in stance at every moment is statically stable
+TROT_PERIOD_FACTOR = 0.6  # derived trot period: this times pi sqrt(h / g); twice that for statically stable gaits
 SWING_HEIGHT_FRACTION = 0.15  # derived foot lift: this fraction of the hips' height above the floor
 
 BUILTIN_SOURCE = "builtin"
@@ -645,7 +646,7 @@ def _period_for_hip_height(robot: RobotSpec, hip_height: float, steps_per_action
     if not hip_height > 0:
         raise ValueError(f"robot {robot.name!r}: cannot derive gait_period: the legs' first joints are not above the "
                          "feet in the standing pose; give gait_period")
-    target = math.sqrt(3 * hip_height / GRAVITY)
+    target = TROT_PERIOD_FACTOR * math.pi * math.sqrt(hip_height / GRAVITY)
     if stance_legs(robot) >= STATIC_STANCE_LEGS:
         target *= 2
     return min(periods, key=lambda period: abs(math.log(period / target)))
@@ -655,12 +656,12 @@ def derive_gait_period(robot: RobotSpec, steps_per_action: int = STEPS_PER_ACTIO
     """A gait period in s suited to the robot's size and gait.
 
     The rule, from searching the expert controller's parameters (``hierloco-robot-check``) on seven robots
-    (``docs/robots.md``): ``T = sqrt(3 h / g)`` for a gait that balances on two legs (a trot), twice that for a
-    statically stable one (at least ``STATIC_STANCE_LEGS`` legs in stance at every moment: a tripod, a wave gait),
-    ``h`` the mean height of the legs' first joints above the floor in the standing pose (gait times scale with
-    ``sqrt(h / g)`` at equal Froude number), rounded to the nearest (in ratio) of :func:`admissible_gait_periods`.
-    Trotting quadrupeds with hips up to about 0.33 m high get 0.2 s, taller ones 0.5 s (1 s only above 1.6 m);
-    hexapods of 0.1-0.6 m get 0.5 s.
+    (``docs/robots.md``): ``T = 0.6 pi sqrt(h / g)`` for a gait that balances on two legs (a trot), twice that for
+    a statically stable one (at least ``STATIC_STANCE_LEGS`` legs in stance at every moment: a tripod, a wave
+    gait), ``h`` the mean height of the legs' first joints above the floor in the standing pose (gait times scale
+    with ``sqrt(h / g)`` at equal Froude number), rounded to the nearest (in ratio) of
+    :func:`admissible_gait_periods`. Trotting quadrupeds with hips lower than 0.28 m get 0.2 s, taller ones 0.5 s
+    (1 s only above 1.4 m); hexapods with hips from 0.07 to 0.35 m get 0.5 s.
 
     Example:
         >>> from hierloco.envs.robots import A1, DAISY
