@@ -17,9 +17,10 @@ for a latent gait policy that reproduces them in simulation (:func:`hierloco.com
 2. **verification** of the best candidates, in order, while the budget lasts: the expert library exactly as the
    experts stage builds it, its tracking check, and a gait policy trained and checked in simulation
    (:func:`hierloco.components.gait_policy.fit_gait_policy`, which adapts the training when the first fit falls
-   short of the bar). The first candidate whose gait policy passes as configured is the one found; when only an
-   adapted fit passes, the next candidates are verified too, and failing a better one, the adapted fit's training
-   (epochs, width) is part of what is found.
+   short of the bar: it always tries twice the epochs). The first candidate whose gait policy passes as configured
+   is the one found; when only an adapted fit passes, the next candidates are verified too while the budget
+   allows another verification, and failing a better one, the adapted fit's ``policy`` overrides are part of what
+   is found.
 
 Example:
     >>> from hierloco.envs.robots import get_robot
@@ -470,8 +471,8 @@ class Verification:
 
     @property
     def policy_adapted(self) -> dict | None:
-        """The gait-policy fit that reached the bar when the configured one did not (its ``epochs``, ``hidden``,
-        ``num_harmonics``, ``lr``: what the recipe's ``policy`` section needs), else ``None``."""
+        """The gait-policy fit that reached the bar when the configured one did not (its ``overrides``: the
+        recipe's ``policy.*`` values that train it), else ``None``."""
         if not self.ok or len(self.policy_attempts) < 2:
             return None
         return self.policy_attempts[-1]
@@ -586,8 +587,8 @@ def tune_expert_parameters(
     verifications: list[Verification] = []
     if verify and best is not None:
         for score in [s for s in ranked if s.passes][:max_verifications] or [best]:
-            if left() <= 0:
-                break
+            if left() <= 0 or (verifications and left() < verifications[-1].seconds):
+                break  # another verification would overrun the budget
             verification = verify_candidate(robot, score.candidate, num_experts=num_experts,
                                             settle_time=settle_time, steps_per_action=steps_per_action,
                                             policy=policy, min_reach=min_reach,
@@ -636,7 +637,7 @@ def verify_candidate(robot: RobotSpec, candidate: Candidate, *, num_experts: int
     else:
         remaining = budget_seconds - (time.perf_counter() - tic)
         fit = fit_gait_policy(library, robot=tuned, min_reproduced_fraction=min_reproduced_fraction,
-                              budget_seconds=max(remaining, 0.0), seed=seed, **(policy or {}))
+                              budget_seconds=max(remaining, 0.0), min_attempts=2, seed=seed, **(policy or {}))
         verification.reproduced_fraction = fit.reproduced_fraction
         verification.policy_attempts = fit.attempts
         for attempt in fit.attempts:

@@ -136,16 +136,11 @@ def train_gait_policy(
     seed: int = 0,
     device: str = "cpu",
     progress: bool = True,
-    init: TrainedGaitPolicy | None = None,
 ) -> TrainedGaitPolicy:
     """Fits ``pi`` and one latent per expert to ``G x N x J`` expert joint targets (rad).
 
     Returns the trained policy, the ``G x Z`` latents, the latent box they span, and a report in ``metadata``:
     ``rmse_per_joint`` (rad), ``rmse``, the training time and ``loss_history`` (the mean standardised MSE per epoch).
-
-    ``init`` continues a fit of the same experts: its weights, normalisation and latents are the starting point
-    (its network's shape wins over ``latent_dim``, ``hidden`` and ``num_harmonics``), and ``epochs`` more are run
-    with a fresh cosine cycle from ``lr`` (a warm restart); ``metadata["epochs"]`` counts all of them.
     """
     targets = torch.as_tensor(np.asarray(joint_targets), dtype=torch.float32)
     if targets.ndim != 3:
@@ -153,21 +148,11 @@ def train_gait_policy(
     num_experts, steps, joints = targets.shape
     generator = torch.Generator().manual_seed(seed)
     torch.manual_seed(seed)
-    if init is None:
-        mean = targets.reshape(-1, joints).mean(0)
-        std = targets.reshape(-1, joints).std(0).clamp_min(1e-3)
-        policy = LatentGaitPolicy(joints, latent_dim, steps_per_action=steps, periods_per_action=periods_per_action,
-                                  num_harmonics=num_harmonics, hidden=hidden, joint_mean=mean,
-                                  joint_std=std).to(device)
-        latents = nn.Parameter(0.1 * torch.randn(num_experts, latent_dim, generator=generator).to(device))
-    else:
-        if tuple(init.latents.shape) != (num_experts, init.policy.latent_dim) or init.policy.num_joints != joints:
-            raise ValueError(f"init was fitted to {tuple(init.latents.shape)[0]} experts of "
-                             f"{init.policy.num_joints} joints, not these {num_experts} x {joints}")
-        policy = LatentGaitPolicy(**init.policy.config()).to(device)
-        policy.load_state_dict(init.policy.state_dict())
-        mean, std = policy.joint_mean.cpu(), policy.joint_std.cpu()
-        latents = nn.Parameter(init.latents.clone().float().to(device))
+    mean = targets.reshape(-1, joints).mean(0)
+    std = targets.reshape(-1, joints).std(0).clamp_min(1e-3)
+    policy = LatentGaitPolicy(joints, latent_dim, steps_per_action=steps, periods_per_action=periods_per_action,
+                              num_harmonics=num_harmonics, hidden=hidden, joint_mean=mean, joint_std=std).to(device)
+    latents = nn.Parameter(0.1 * torch.randn(num_experts, latent_dim, generator=generator).to(device))
     policy_optim = torch.optim.Adam(policy.parameters(), lr=lr)
     latent_optim = torch.optim.Adam([latents], lr=latent_lr, weight_decay=latent_weight_decay)
 
@@ -201,10 +186,6 @@ def train_gait_policy(
     metadata = {"rmse_per_joint": rmse_per_joint.tolist(), "rmse": float(((reconstruction - targets) ** 2).mean().sqrt()),
                 "train_seconds": time.perf_counter() - start, "num_experts": num_experts, "epochs": epochs,
                 "seed": seed, "loss_history": loss_history}
-    if init is not None:
-        metadata["epochs"] = epochs + int(init.metadata.get("epochs", 0))
-        metadata["train_seconds"] += float(init.metadata.get("train_seconds", 0.0))
-        metadata["loss_history"] = list(init.metadata.get("loss_history", [])) + loss_history
     return TrainedGaitPolicy(policy.cpu(), z, z.min(0).values, z.max(0).values, metadata)
 
 
@@ -219,8 +200,9 @@ class GaitPolicyFit:
     Attributes:
         trained: the fit kept (the first that reaches the bar, else the one that reproduces most).
         check: its :func:`hierloco.components.evaluation.check_gait_policy` result.
-        attempts: every fit tried, in order: ``name``, ``epochs`` (in total), ``hidden``, ``num_harmonics``,
-            ``lr``, ``continued`` (from the fit before), ``reproduced_fraction``, ``rmse`` and ``seconds``.
+        attempts: every fit tried, in order: ``name``, ``epochs``, ``hidden``, ``num_harmonics``, ``lr``,
+            ``overrides`` (those that differ from the configured ones: the recipe's ``policy.*`` overrides that
+            train it), ``reproduced_fraction``, ``rmse`` and ``seconds``.
         min_reproduced_fraction: the bar.
     """
 
@@ -253,6 +235,7 @@ def fit_gait_policy(
     adaptive: bool = True,
     budget_epochs: int | None = None,
     budget_seconds: float | None = None,
+    min_attempts: int = 1,
     check_pairs: int = 50,
     check_actions: int = 4,
     periods_per_action: int | None = None,
@@ -263,18 +246,19 @@ def fit_gait_policy(
     than ``min_reproduced_fraction`` of them, adapts the training before giving up (Li et al., Sec. III-B: pi(., z_g)
     must walk like expert g).
 
-    The ladder, stopping at the first fit that reaches the bar:
+    The ladder, stopping at the first fit that reaches the bar; every fit is :func:`train_gait_policy` from scratch,
+    so each is what a recipe trains with the ``policy`` overrides its attempt records (``overrides``):
 
-    1. ``"as configured"``: :func:`train_gait_policy` with ``train_kwargs`` (what the pipeline trains without this
-       function; with ``adaptive=False`` that is all);
-    2. ``"longer"``: that fit trained for as many epochs again (a warm restart of the cosine schedule);
-    3. ``"wider"``: twice the hidden units and twice the phase harmonics (up to the Nyquist limit: short swing
-       phases in long periods need them), from scratch, twice the epochs;
-    4. ``"lower learning rate"``: the wider fit trained again as long at a third of the learning rate.
+    1. ``"as configured"``: ``train_kwargs`` as given (what the pipeline trains without this function; with
+       ``adaptive=False`` that is all);
+    2. ``"longer"``: twice the epochs;
+    3. ``"wider"``: twice the epochs, twice the hidden units and twice the phase harmonics (up to the Nyquist limit:
+       short swing phases in long periods need them);
+    4. ``"lower learning rate"``: the wider network for four times the epochs at a third of the learning rate.
 
-    A step runs only while its epochs fit in ``budget_epochs`` (all fits together; deterministic: the choice for
-    a cached pipeline stage) and its estimated time in ``budget_seconds`` (from the first fit's speed). Before
-    adapting, the experts' own targets are replayed open loop
+    Steps after the first ``min_attempts`` run only while their epochs fit in ``budget_epochs`` (all fits together;
+    deterministic: the choice for a cached pipeline stage) and their estimated time in ``budget_seconds`` (from the
+    first fit's speed). Before adapting, the experts' own targets are replayed open loop
     (:func:`hierloco.components.evaluation.replayed_fraction`): when they reproduce fewer than the bar, no fit can
     reach it and the ladder stops there (``limited_by_experts``: the experts need other parameters,
     ``hierloco-robot-check``).
@@ -283,6 +267,7 @@ def fit_gait_policy(
         library: a :class:`hierloco.components.expert_library.ExpertLibrary`.
         robot: its robot (default: the library's).
         periods_per_action: gait periods per action (default: from the robot's gait period).
+        min_attempts: fits tried whatever the budgets (while the experts' own replay reaches the bar).
         check_pairs, check_actions: :func:`hierloco.components.evaluation.check_gait_policy`'s ``num_pairs`` and
             ``num_actions``.
         **train_kwargs: :func:`train_gait_policy`'s keyword arguments (``epochs``, ``hidden``, ``lr``, ``seed``...).
@@ -308,41 +293,43 @@ def fit_gait_policy(
     lr = float(train_kwargs.pop("lr", 1e-3))
     seed = int(train_kwargs.get("seed", 0))
     nyquist = max(1, (library.steps_per_action // periods_per_action) // 2)
-    plan = [("as configured", dict(epochs=epochs, hidden=hidden, num_harmonics=harmonics, lr=lr), False)]
+    configured = dict(epochs=epochs, hidden=hidden, num_harmonics=harmonics, lr=lr)
+    plan = [("as configured", configured)]
     if adaptive:
         wide = dict(hidden=2 * hidden, num_harmonics=min(2 * harmonics, nyquist))
-        plan += [("longer", dict(epochs=epochs, hidden=hidden, num_harmonics=harmonics, lr=lr), True),
-                 ("wider", dict(epochs=2 * epochs, lr=lr, **wide), False),
-                 ("lower learning rate", dict(epochs=2 * epochs, lr=lr / 3, **wide), True)]
+        plan += [("longer", {**configured, "epochs": 2 * epochs}),
+                 ("wider", {**configured, "epochs": 2 * epochs, **wide}),
+                 ("lower learning rate", {**configured, "epochs": 4 * epochs, "lr": lr / 3, **wide})]
     start = time.perf_counter()
-    attempts, fits, spent_epochs, seconds_per_unit = [], [], 0, None
-    previous, ceiling = None, None
-    for name, options, continued in plan:
-        if attempts and ceiling is None:
-            ceiling = replayed_fraction(library, robot=robot, num_actions=check_actions, seed=seed)
+    attempts, fits, spent_epochs, seconds_per_epoch, ceiling = [], [], 0, None, None
+    for name, options in plan:
+        if attempts:
+            if ceiling is None:
+                ceiling = replayed_fraction(library, robot=robot, num_actions=check_actions, seed=seed)
             if ceiling < min_reproduced_fraction:
                 break
-        cost = options["epochs"] * (options["hidden"] / hidden) ** 2  # in epochs of the configured width
-        if attempts and budget_epochs is not None and spent_epochs + options["epochs"] > budget_epochs:
-            break
-        if attempts and budget_seconds is not None and \
-                time.perf_counter() - start + cost * seconds_per_unit > budget_seconds:
-            break
+            cost = options["epochs"] * (options["hidden"] / hidden) ** 2  # in epochs of the configured width
+            within = len(attempts) < min_attempts or (
+                (budget_epochs is None or spent_epochs + options["epochs"] <= budget_epochs)
+                and (budget_seconds is None or time.perf_counter() - start + cost * seconds_per_epoch
+                     <= budget_seconds))
+            if not within:
+                break
         tic = time.perf_counter()
         trained = train_gait_policy(library.joint_targets, periods_per_action=periods_per_action, progress=progress,
-                                    init=previous if continued else None, **options, **train_kwargs)
+                                    **options, **train_kwargs)
         check = check_gait_policy(LatentLowLevel(trained, robot), library, trained.latents.numpy(),
                                   num_pairs=check_pairs, num_actions=check_actions, seed=seed)
         seconds = time.perf_counter() - tic
-        if seconds_per_unit is None:
-            seconds_per_unit = seconds / max(cost, 1)
+        if seconds_per_epoch is None:
+            seconds_per_epoch = seconds / max(epochs, 1)
         spent_epochs += options["epochs"]
-        attempts.append({"name": name, "epochs": int(trained.metadata["epochs"]), "hidden": trained.policy.hidden,
-                         "num_harmonics": trained.policy.num_harmonics, "lr": options["lr"], "continued": continued,
+        overrides = {key: value for key, value in options.items() if value != configured[key]}
+        attempts.append({"name": name, "epochs": options["epochs"], "hidden": trained.policy.hidden,
+                         "num_harmonics": trained.policy.num_harmonics, "lr": options["lr"], "overrides": overrides,
                          "reproduced_fraction": float(check["reproduced_fraction"]),
                          "rmse": float(trained.metadata["rmse"]), "seconds": seconds})
         fits.append((trained, check))
-        previous = trained
         if check["reproduced_fraction"] >= min_reproduced_fraction:
             break
     best = next((i for i, (_, c) in enumerate(fits) if c["reproduced_fraction"] >= min_reproduced_fraction),

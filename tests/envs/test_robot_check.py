@@ -9,6 +9,7 @@ wave gait; ``quadruped40``: position servos in the file).
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 import time
@@ -171,7 +172,7 @@ def test_cli_bad_input_is_one_line_and_exit_2(tmp_path, capsys):
         out, err = capsys.readouterr()
         lines = err.strip().splitlines()
         assert len(lines) == 1 and lines[0].startswith("error: "), err
-        assert __import__("re").search(message, lines[0]), lines[0]
+        assert re.search(message, lines[0]), lines[0]
         assert "Traceback" not in err + out
 
 

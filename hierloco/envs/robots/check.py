@@ -101,7 +101,7 @@ def standing_statics(robot: RobotSpec, model: mujoco.MjModel | None = None) -> S
         >>> from hierloco.envs.robots import get_robot
         >>> statics = standing_statics(get_robot("a1"))
         >>> statics.stance_legs, round(statics.legs[0].foot_drop, 3)
-        (2, 0.25)
+        (2, 0.249)
     """
     model = compile_model(robot) if model is None else model
     data = mujoco.MjData(model)
@@ -408,11 +408,10 @@ def main(argv=None) -> int:
         print("\n".join(lines))
         adapted = verified.policy_adapted if verified is not None else None
         if adapted is not None:
-            print(f"note: the gait policy reached the bar only with its adapted '{adapted['name']}' fit "
-                  f"({adapted['epochs']} epochs in all, {adapted['hidden']} units, {adapted['num_harmonics']} "
-                  f"harmonics; the configured {args.epochs} epochs of {args.hidden} units reproduce "
-                  f"{verified.policy_attempts[0]['reproduced_fraction']:.0%}): train it adaptively "
-                  "(hierloco.components.gait_policy.fit_gait_policy), or longer (policy.epochs, not verified here)")
+            overrides = " ".join(f"policy.{key}={value:g}" for key, value in adapted["overrides"].items())
+            print(f"and train the gait policy with: {overrides} (recipe overrides; the configured {args.epochs} "
+                  f"epochs of {args.hidden} units reproduce {verified.policy_attempts[0]['reproduced_fraction']:.0%} "
+                  f"of the experts, this fit {adapted['reproduced_fraction']:.0%})")
         return EXIT_FOUND
     print(f"\nnot found in {result.seconds:.0f} s; the best candidate: {result.best.candidate.label}")
     print("what limits it:")
