@@ -506,6 +506,38 @@ class TuningResult:
             return self.verified.candidate.params
         return self.best.candidate.params if self.best is not None else None
 
+    def tuned_robot(self) -> RobotSpec:
+        """The robot with the parameters found (its own when nothing was found)."""
+        params = self.params if self.found else None
+        return self.robot if params is None else params.apply(self.robot)
+
+    def summary(self) -> dict:
+        """A JSON-able record (for a run's ``run.json``): whether found, the parameters and the YAML lines, what
+        changed, the tuned robot's fingerprint, the verifications (tracking, replay, gait-policy fits), the
+        screening counts and the wall-clock."""
+        from dataclasses import asdict
+
+        from hierloco.envs.robots import robot_fingerprint
+
+        params = self.params
+        verified = self.verified
+        return {
+            "found": self.found, "seconds": round(self.seconds, 1),
+            "parameters": asdict(params) if params is not None else None,
+            "changed": params.changed(self.reference) if params is not None else [],
+            "yaml": params.yaml_lines(self.robot, only=params.changed(self.reference)) if params is not None else [],
+            "tuned_fingerprint": robot_fingerprint(self.tuned_robot()),
+            "policy_overrides": (verified.policy_adapted or {}).get("overrides", {}) if verified is not None else {},
+            "screened": {stage: {"candidates": len(scores), "pass": sum(s.passes for s in scores)}
+                         for stage, scores in self.screened.items()},
+            "verifications": [{"label": v.candidate.label, "problem": v.problem,
+                               "tracking": v.report.summary() if v.report is not None else None,
+                               "replayed_fraction": v.replayed_fraction,
+                               "reproduced_fraction": v.reproduced_fraction, "policy_attempts": v.policy_attempts,
+                               "seconds": round(v.seconds, 1)} for v in self.verifications],
+            "limits": self.limits,
+        }
+
     @property
     def verified(self) -> Verification | None:
         """The candidate found: the first verified whose gait policy passes as configured, else the first whose
