@@ -91,7 +91,7 @@ def test_printed_parameters_read_back_as_the_robot(tmp_path):
         "{FR: [0, -0.8, 1.6], FL: [0, -0.8, 1.6], RR: [0, 0.8, -1.6], RL: [0, 0.8, -1.6]}")
 
 
-@pytest.mark.parametrize("name", ["quadruped20", "hexapod10", "hexapod10_wave"])
+@pytest.mark.parametrize("name", ["quadruped20", "hexapod10_wave"])
 def test_a_yaml_with_names_and_a_pose_walks_with_the_derived_defaults(name):
     """With the derived gait period, standing height and swing height (docs/robots.md), the experts stage's
     experts walk as commanded and their own targets replay as recorded (the wave gait had no admissible period

@@ -145,9 +145,6 @@ def test_fit_adapts_until_the_gait_policy_reproduces_its_experts(small_daisy_lib
     assert fit.ok and fit.reproduced_fraction == wider["reproduced_fraction"] >= 0.5
     assert fit.trained.policy.hidden == 128 and fit.experts_replayed_fraction == 1.0
     assert fit.trained.metadata["adaptive_fit"]["kept"] == "wider"
-    plain = train_gait_policy(small_daisy_library.joint_targets, periods_per_action=1, progress=False,
-                              **{**SHORT_FIT, **wider["overrides"]})
-    torch.testing.assert_close(fit.trained.latents, plain.latents, rtol=0, atol=0)
     # a budget of epochs stops the ladder before the wider fit
     budget = fit_gait_policy(small_daisy_library, min_reproduced_fraction=0.5, check_pairs=4, budget_epochs=90,
                              **SHORT_FIT)
