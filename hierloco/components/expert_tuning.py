@@ -567,8 +567,9 @@ def tune_expert_parameters(
 
     Args:
         robot: a registered name, a YAML path or a :class:`RobotSpec`.
-        budget_seconds: s of wall-clock; no stage or verification starts after it (the one running finishes;
-            the gait policy's adaptive training stops at it).
+        budget_seconds: s of wall-clock; no stage or verification starts after it, nor one that would not end
+            within it (the one running finishes: its gait policy gets one longer fit whatever the budget, then
+            adapts further only within it).
         num_experts, settle_time: the expert library verified (the experts stage's ``num_experts``,
             ``settle_time``; default: the small preset's).
         screening_settle_time: s of closed-loop walking before each screened expert is recorded.

@@ -327,7 +327,8 @@ def main(argv=None) -> int:
         description="Check a robot description and search the expert controller's parameters for experts that walk "
                     "as commanded and a gait policy that reproduces them (docs/robots.md).")
     parser.add_argument("robot", help="path/to/robot.yaml (or a registered robot name)")
-    parser.add_argument("--budget", type=float, default=300.0, help="s of search and verification (default 300)")
+    parser.add_argument("--budget", type=float, default=300.0, help="s of search and verification (default 300): "
+                        "no stage or verification starts after it; the one running finishes")
     parser.add_argument("--experts", type=int, default=30, help="experts in the verified library (default 30, the "
                         "small preset's)")
     parser.add_argument("--settle-time", type=float, default=3.0, help="s each verified expert walks before it is "
@@ -402,16 +403,16 @@ def main(argv=None) -> int:
     lines = params.yaml_lines(robot, only=changed)
     if result.found:
         what = "verified" if verified is not None else "screened only (--no-verify)"
-        same = "" if set(changed) - {"standing_height", "gait_period"} else (
-            "; the description's own parameters walk, these lines pin the derived values")
+        same = "" if changed else "; the description's own parameters walk, these lines pin the derived values"
         print(f"\nfound in {result.seconds:.0f} s ({what}{same}); paste into {where} (replacing these keys):")
         print("\n".join(lines))
         adapted = verified.policy_adapted if verified is not None else None
         if adapted is not None:
             overrides = " ".join(f"policy.{key}={value:g}" for key, value in adapted["overrides"].items())
-            print(f"and train the gait policy with: {overrides} (recipe overrides; the configured {args.epochs} "
-                  f"epochs of {args.hidden} units reproduce {verified.policy_attempts[0]['reproduced_fraction']:.0%} "
-                  f"of the experts, this fit {adapted['reproduced_fraction']:.0%})")
+            print(f"# and train the gait policy with the recipe overrides {overrides} (the configured "
+                  f"{args.epochs} epochs of {args.hidden} units reproduce "
+                  f"{verified.policy_attempts[0]['reproduced_fraction']:.0%} of the experts, this fit "
+                  f"{adapted['reproduced_fraction']:.0%})")
         return EXIT_FOUND
     print(f"\nnot found in {result.seconds:.0f} s; the best candidate: {result.best.candidate.label}")
     print("what limits it:")
