@@ -153,6 +153,30 @@ def action_velocities(results, steps_per_action: int) -> tuple[list[np.ndarray],
     return velocities, np.any([r.failed[:, -1] for r in results], axis=0)
 
 
+def replayed_fraction(library, *, robot=None, num_actions: int = 4, seed: int = 0) -> float:
+    """The gait policy's check run on the experts themselves: the fraction of ``library``'s experts whose recorded
+    targets, replayed open loop from standing ``num_actions`` times, walk within 0.05 m/s of their recorded
+    velocity (mean over the last ``num_actions - 1`` actions). No gait policy reproduces an expert much better than
+    its own targets do, so this is the ceiling of :func:`check_gait_policy`'s ``reproduced_fraction``.
+
+    Example:
+        >>> from hierloco.components.expert_library import build_expert_library
+        >>> library = build_expert_library("daisy", 3, settle_time=1.0, progress=False)
+        >>> replayed_fraction(library)
+        1.0
+    """
+    from hierloco.envs.batched_sim import BatchedSimulator
+
+    sim = BatchedSimulator(library.robot if robot is None else robot, library.num_experts, seed=seed)
+    try:
+        results = [sim.run(library.joint_targets) for _ in range(num_actions)]
+    finally:
+        sim.close()
+    velocities, fell = action_velocities(results, library.steps_per_action)
+    error = np.linalg.norm(np.mean(velocities, 0) - library.velocity_local, axis=-1)
+    return float(np.mean((error <= 0.05) & ~fell))
+
+
 def check_gait_policy(low_level, library, latents: np.ndarray, *, num_pairs: int = 50, num_actions: int = 4,
                       seed: int = 0) -> dict:
     """How well ``pi(., z)`` reproduces and interpolates the experts, in simulation (Li et al., RA-L 2021, Sec. III-B:

@@ -178,9 +178,16 @@ def build_expert_library(
     command_low: Sequence[float] | None = None,
     command_high: Sequence[float] | None = None,
     max_rounds: int = 5,
+    max_failed_experts: int | None = None,
     progress: bool = True,
 ) -> ExpertLibrary:
     """Builds a library of ``num_experts`` gaits (see the module docstring).
+
+    Before any simulation, the robot's description (:func:`hierloco.envs.robots.check.description_problems`) and
+    the footholds its gait asks for (:func:`hierloco.components.experts.foothold_problems`) are checked, in
+    milliseconds; during it, the experts that fall are counted. Either stops the build at once with an
+    :class:`ExpertQualityError` saying what is wrong and what to try, instead of walking (or grinding in leg IK)
+    to the end.
 
     Args:
         steps_per_action: N, control steps per latent action; ``N * 0.01 s`` must hold a whole number of gait
@@ -189,6 +196,9 @@ def build_expert_library(
         commands: ``G x 3`` commands to use instead of sampling them (e.g. for tests).
         command_low, command_high: the box the commands are sampled in (default the robot's; see
             :func:`command_box`); the library records it, and its tracking is checked against it.
+        max_rounds: rounds of replacing fallen experts by fresh commands.
+        max_failed_experts: the build stops as soon as more experts than this have fallen or blown up, over all
+            rounds (default: :func:`default_max_failed_experts`).
     """
     robot = get_robot(robot)
     low, high = command_box(robot, command_low, command_high)
@@ -202,6 +212,12 @@ def build_expert_library(
     wanted = sample_commands(robot, num_experts, rng, low, high) if commands is None else np.asarray(commands, float)
     if wanted.shape != (num_experts, 3):
         raise ValueError(f"commands must be {num_experts} x 3, got {wanted.shape}")
+    max_failed = default_max_failed_experts(num_experts) if max_failed_experts is None else int(max_failed_experts)
+    if not disabled_legs:  # with locked legs the standing statics and footholds of the whole robot do not apply
+        problems = expert_setup_problems(robot, command_low=low, command_high=high)
+        if problems:
+            raise ExpertQualityError(f"{robot.name}: the experts cannot walk, found before any simulation: "
+                                     + " | ".join(problems))
     period_steps = int(round(robot.gait_period / CONTROL_TIMESTEP))
     settle_steps = int(np.ceil(settle_time / robot.gait_period)) * period_steps
     records, rejected = [], 0
@@ -212,9 +228,14 @@ def build_expert_library(
         controller = RaibertController(robot, len(pending))
         # settle closed loop, freeze the feedback, let one gait period pass, record one action
         record = settle_steps + period_steps
+        falls = _FallCounter(len(pending), max_failed - rejected)
         out = run_closed_loop(sim, controller, pending, record + steps_per_action,
-                              ramp_steps=min(settle_steps, 100), freeze_after=settle_steps)
+                              ramp_steps=min(settle_steps, 100), freeze_after=settle_steps, stop_when=falls)
         sim.close()
+        if falls.exceeded:
+            bar.close()
+            raise ExpertQualityError(_falls_message(robot, out, pending, rejected, max_failed, len(records),
+                                                    steps_per_action))
         ok = ~out.failed[:, -1]
         for g in np.flatnonzero(ok):
             records.append((pending[g], out.joint_targets[g, record:], out.com_state[g, record - 1:],
@@ -226,7 +247,9 @@ def build_expert_library(
         pending = sample_commands(robot, int((~ok).sum()), rng, low, high)
     bar.close()
     if len(records) < num_experts:
-        raise RuntimeError(f"{robot.name}: only {len(records)} of {num_experts} experts walked without falling")
+        raise ExpertQualityError(f"{robot.name}: only {len(records)} of {num_experts} experts walked without falling "
+                                 f"in {max_rounds} rounds ({rejected} fell); what to try: "
+                                 + "; ".join(_advice(robot, steps_per_action)))
     cmds, targets, states, contacts = (np.stack(x) for x in zip(*records))
     displacement, velocity, yaw_rate = action_motion(states, steps_per_action * CONTROL_TIMESTEP)
     metadata = {
@@ -247,6 +270,73 @@ def build_expert_library(
     return library
 
 
+def default_max_failed_experts(num_experts: int) -> int:
+    """How many experts may fall before :func:`build_expert_library` gives up: a quarter of them, at least 5
+    (the built-in robots lose none to 2 of 50, ``docs/robots.md``)."""
+    return max(5, int(num_experts) // 4)
+
+
+def expert_setup_problems(robot: str | RobotSpec, *, command_low=None, command_high=None) -> list[str]:
+    """What keeps ``robot``'s experts from walking, found in milliseconds without simulating: the description's
+    problems (:func:`hierloco.envs.robots.check.description_problems`) and footholds out of the legs' reach
+    (:func:`hierloco.components.experts.foothold_problems`), one line each; empty when there is none.
+
+    Example:
+        >>> expert_setup_problems("a1")
+        []
+    """
+    from hierloco.components.experts import foothold_problems
+    from hierloco.envs.robots.check import description_problems
+
+    robot = get_robot(robot)
+    problems = description_problems(robot)
+    if problems:  # footholds of a pose that cannot stand mean little
+        return problems
+    return foothold_problems(robot, command_low=command_low, command_high=command_high)
+
+
+class _FallCounter:
+    """``stop_when`` for :func:`run_closed_loop`: true once more than ``allowed`` copies have failed."""
+
+    def __init__(self, num_robots: int, allowed: int):
+        self.failed = np.zeros(num_robots, bool)
+        self.allowed = allowed
+        self.exceeded = False
+
+    def __call__(self, chunk) -> bool:
+        self.failed |= chunk.failed[:, -1]
+        self.exceeded = int(self.failed.sum()) > self.allowed
+        return self.exceeded
+
+
+def _falls_message(robot: RobotSpec, out, commands: np.ndarray, rejected: int, max_failed: int, walked: int,
+                   steps_per_action: int) -> str:
+    """Why the experts stage stops on falls: how many, how soon, how (roll, pitch, height, physics), at which
+    commands, and what to try."""
+    failed = out.failed
+    fell = np.flatnonzero(failed[:, -1])
+    first = failed[fell].argmax(1)  # the step each fell at
+    causes = {"pitch": 0, "roll": 0, "height": 0, "physics": 0}
+    for g, step in zip(fell, first):
+        roll, pitch = np.abs(out.roll_pitch[g, step])
+        if out.unstable[g, step]:
+            causes["physics"] += 1
+        elif pitch > robot.max_pitch:
+            causes["pitch"] += 1
+        elif roll > robot.max_roll:
+            causes["roll"] += 1
+        else:
+            causes["height"] += 1
+    how = ", ".join(f"{n} by {cause}" for cause, n in causes.items() if n)
+    shown = "; ".join("(" + ", ".join(f"{v:+.2f}" for v in commands[g]) + ")" for g in fell[:3])
+    return (f"{robot.name}: {len(fell) + rejected} experts fell, more than the {max_failed} allowed "
+            f"(max_failed_experts), {walked} walked; the experts stage stopped after "
+            f"{failed.shape[1] * CONTROL_TIMESTEP:.1f} s of walking: the median one fell after "
+            f"{np.median(first + 1) * CONTROL_TIMESTEP:.2f} s ({how}; roll limit {robot.max_roll:g} rad, pitch "
+            f"{robot.max_pitch:g} rad, height {robot.min_height:.3f} m), e.g. at commands (vx, vy, yaw_rate) {shown}; "
+            "what to try: " + "; ".join(_advice(robot, steps_per_action)) + " (hierloco-robot-check searches them)")
+
+
 def replay(sim: BatchedSimulator, joint_targets: np.ndarray, num_actions: int):
     """Replays ``B x N x J`` one-action patterns open loop ``num_actions`` times in a row on ``sim``."""
     return sim.run(np.tile(joint_targets, (1, num_actions, 1)))
@@ -262,15 +352,17 @@ NO_RESPONSE_SLOPE = 0.25  # achieved per commanded below this: the robot ignores
 
 
 class ExpertQualityError(Finding, ValueError):
-    """The expert gaits do not walk as commanded: the library cannot represent the command box.
+    """The expert gaits do not walk as commanded: the library cannot represent the command box, the experts
+    fall, or the robot's description keeps them from walking at all.
 
     Attributes:
-        report: the :class:`ExpertTrackingReport` that says how far off, in which direction, and what to try.
+        report: the :class:`ExpertTrackingReport` that says how far off, in which direction, and what to try
+            (``None`` when the build stopped before the experts could be judged: the message says why).
     """
 
-    def __init__(self, report: "ExpertTrackingReport"):
+    def __init__(self, report: "ExpertTrackingReport | str"):
         super().__init__(str(report))
-        self.report = report
+        self.report = report if isinstance(report, ExpertTrackingReport) else None
 
 
 @dataclass(frozen=True)
@@ -399,16 +491,16 @@ def _span(values) -> str:
 
 def _advice(robot: RobotSpec | None, steps_per_action: int) -> tuple[str, ...]:
     if robot is None:
-        return ("a longer gait_period", "stiffer kp and more joint_damping",
+        return ("another gait_period (hierloco-robot-check searches it)", "stiffer kp and more joint_damping",
                 "a standing_height that puts the feet on the floor", "a smaller command box")
     periods = admissible_gait_periods(len(robot.gait_groups), steps_per_action)
     derived = derive_gait_period(robot, steps_per_action) if periods else None
-    longer = [p for p in periods if p > robot.gait_period]
     hint = f"; the size rule gives {derived} s (derive_gait_period)" if derived is not None else ""
     kp, damping = (_span(values) for values in (robot.kp, robot.joint_damping))
     return (
-        f"gait_period (now {robot.gait_period} s): longer stances let the legs carry the body{hint}; periods that "
-        f"fit {steps_per_action}-step actions: {', '.join(f'{p:g}' for p in longer) or 'none longer'} s",
+        f"gait_period (now {robot.gait_period} s): a trot balances on short stances, a statically stable gait "
+        f"(a tripod) walks well with long ones{hint}; periods that fit {steps_per_action}-step actions: "
+        f"{', '.join(f'{p:g}' for p in periods) or 'none'} s",
         f"kp (now {kp} N m/rad) and joint_damping (now {damping} N m s/rad): stiffer, better damped servos sag and "
         "slip less under the body's weight",
         f"standing_height (now {robot.standing_height:.3f} m; the feet touch the floor at "
@@ -479,5 +571,6 @@ def require_expert_library_quality(library: ExpertLibrary, *, robot: str | Robot
 
 
 __all__ = ["AxisTracking", "ExpertLibrary", "ExpertQualityError", "ExpertTrackingReport", "MIN_REACH",
-           "action_motion", "build_expert_library", "command_box", "diagnose_expert_library", "replay",
-           "require_expert_library_quality", "sample_commands"]
+           "action_motion", "build_expert_library", "command_box", "default_max_failed_experts",
+           "diagnose_expert_library", "expert_setup_problems", "replay", "require_expert_library_quality",
+           "sample_commands"]

@@ -3,8 +3,9 @@
 A desired CoM velocity ``(vx, vy, yaw_rate)`` in the robot's local (yaw) frame becomes footsteps and then joint
 targets, closed loop on the measured CoM velocity, batched over B robots that share one gait clock:
 
-- gait: the robot's gait groups take turns in swing (trot pairs for A1, tripods for Daisy); with K groups each
-  swings for ``gait_period / K`` and stands for the rest (``stance_duration``);
+- gait: the robot's gait groups take turns in swing (trot pairs for A1, tripods for Daisy, one leg at a time for a
+  wave gait); with K groups each swings for ``floor(P / K)`` of the period's P control steps and stands for the
+  rest (``stance_duration``); when K does not divide P the period ends with ``P mod K`` steps on all feet;
 - stance: a stance foot moves in the body's yaw frame opposite to the commanded motion,
   ``p <- R(-yaw_rate dt) p - v_des dt``;
 - swing: the foot travels from lift-off to the touchdown point chosen by the feedback law
@@ -41,6 +42,8 @@ Example:
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -103,10 +106,12 @@ class RaibertController:
         self.steps_per_period = int(round(steps))
         groups = self.robot.gait_groups
         self.num_groups = len(groups)
-        if self.steps_per_period % self.num_groups:
-            raise ValueError(f"{self.steps_per_period} steps per gait period do not split into {self.num_groups} "
-                             "equal swing phases")
+        # each group swings for swing_steps in turn; when the period does not split evenly (a wave gait of 3 or 6
+        # groups in a 100-step action), its last steps_per_period % num_groups steps have every foot on the ground
         self.swing_steps = self.steps_per_period // self.num_groups
+        if self.swing_steps < 1:
+            raise ValueError(f"{self.steps_per_period} steps per gait period are too few for {self.num_groups} "
+                             "swing phases of at least one step")
         self.stance_duration = self.gait_period - self.swing_steps * self.dt
         self.leg_group = np.array([next(g for g, grp in enumerate(groups) if leg in grp)
                                    for leg in self.robot.leg_names])
@@ -264,9 +269,90 @@ class RaibertController:
         self.step_count += 1
 
 
+@dataclass(frozen=True)
+class FootholdReach:
+    """How far each leg is from the footholds the expert gait asks of it (:func:`foothold_reach`).
+
+    Attributes:
+        shortfall: ``L`` m, per leg the largest distance between a foothold and the nearest foot position the leg
+            reaches (0: every foothold reached).
+        worst_target: ``L x 3`` m, per leg that foothold, in the base frame.
+        stride: m, the largest stance sweep asked, ``stance_duration * |v|`` at the box's corners.
+        stance_duration: s. swing_height: m.
+    """
+
+    shortfall: np.ndarray
+    worst_target: np.ndarray
+    stride: float
+    stance_duration: float
+    swing_height: float
+
+
+def foothold_reach(robot: str | RobotSpec, *, command_low=None, command_high=None, gait_period: float | None = None,
+                   swing_height: float | None = None) -> FootholdReach:
+    """Whether the legs reach what the expert gait asks at the corners of the command box: in stance each foot
+    sweeps ``stance_duration * v`` through its standing position (turned by ``yaw_rate * stance_duration``), in
+    swing it rises ``swing_height`` above it. Leg IK on those footholds, in milliseconds, before any simulation:
+    a foothold out of reach costs the experts' IK many restarts per control step.
+
+    Example:
+        >>> reach = foothold_reach("a1")
+        >>> float(reach.shortfall.max()) < 0.01
+        True
+    """
+    robot = get_robot(robot)
+    controller = RaibertController(robot, 1, gait_period=gait_period, swing_height=swing_height,
+                                   ik_solver="vectorised")
+    low = np.asarray(robot.command_low if command_low is None else command_low, float)
+    high = np.asarray(robot.command_high if command_high is None else command_high, float)
+    half = controller.stance_duration / 2
+    corners = np.array(np.meshgrid(*[(lo, 0.0, hi) for lo, hi in zip(low, high)], indexing="ij")).reshape(3, -1).T
+    nominal = controller.nominal_feet  # L x 3
+    targets = []
+    for sign in (-1.0, 1.0):  # touchdown (+) and lift-off (-) ends of the stance sweep
+        xy = rotate_xy(nominal[None, :, :2], sign * corners[:, None, 2] * half) + sign * half * corners[:, None, :2]
+        targets.append(np.concatenate([xy, np.broadcast_to(nominal[None, :, 2:], xy.shape[:-1] + (1,))], -1))
+    apex = nominal.copy()
+    apex[:, 2] += controller.swing_height
+    targets = np.concatenate(targets + [apex[None]])  # M x L x 3
+    kinematics = controller.kinematics
+    q = kinematics.inverse(targets, np.broadcast_to(kinematics.standing_pose, targets.shape[:1] + (robot.num_joints,)))
+    error = np.linalg.norm(kinematics.forward(q) - targets, axis=-1)  # M x L
+    worst = error.argmax(0)
+    legs = np.arange(len(robot.legs))
+    return FootholdReach(shortfall=error[worst, legs], worst_target=targets[worst, legs],
+                         stride=float(2 * half * np.linalg.norm(corners[:, :2], axis=-1).max()),
+                         stance_duration=float(controller.stance_duration), swing_height=controller.swing_height)
+
+
+MAX_FOOTHOLD_SHORTFALL = 0.01  # m: footholds further out of reach than this are refused before any simulation
+
+
+def foothold_problems(robot: str | RobotSpec, *, command_low=None, command_high=None) -> list[str]:
+    """:func:`foothold_reach` as problem lines (at most one), for a shortfall over ``MAX_FOOTHOLD_SHORTFALL``.
+
+    Example:
+        >>> foothold_problems("a1")
+        []
+    """
+    robot = get_robot(robot)
+    reach = foothold_reach(robot, command_low=command_low, command_high=command_high)
+    short = np.flatnonzero(reach.shortfall > MAX_FOOTHOLD_SHORTFALL)
+    if not len(short):
+        return []
+    worst = int(short[np.argmax(reach.shortfall[short])])
+    target = ", ".join(f"{v:+.3f}" for v in reach.worst_target[worst])
+    names = ", ".join(robot.leg_names[i] for i in short)
+    return [f"footholds: leg {robot.leg_names[worst]} cannot reach the footholds its gait asks for, "
+            f"{reach.shortfall[worst]:.3f} m short of ({target}) m in the base frame (legs {names}; a "
+            f"{reach.stance_duration:.2f} s stance sweeps up to {reach.stride:.2f} m at the command box's corners, "
+            f"swing height {reach.swing_height:g} m): give a shorter gait_period, a smaller command box or swing_height, "
+            "or a standing pose with more room (hierloco-robot-check searches them)"]
+
+
 def run_closed_loop(sim: BatchedSimulator, controller: RaibertController, commands: np.ndarray,
                     num_steps: int, ramp_steps: int = 0, freeze_after: int | None = None,
-                    feedback_steps: int = 1) -> SimulationResult:
+                    feedback_steps: int = 1, stop_when=None) -> SimulationResult:
     """Runs ``controller`` on ``sim`` for ``num_steps`` control steps at fixed ``commands`` (``B x 3``).
 
     The command ramps up linearly over the first ``ramp_steps``; the feedback is frozen after ``freeze_after``
@@ -276,8 +362,9 @@ def run_closed_loop(sim: BatchedSimulator, controller: RaibertController, comman
     phase each touchdown point is chosen at lift-off. ``feedback_steps=1`` is the per-step loop the experts are
     recorded with. The first chunk observes the current state (its yaw rate unknown: 0) after the measurements
     the previous run's last chunk left (all but its last step's, which the state repeats), so successive runs (one
-    per action) lose none. Returns the per-step :class:`SimulationResult` with an extra attribute
-    ``joint_targets`` (``B x T x J``).
+    per action) lose none. ``stop_when(chunk)``, called with each chunk's :class:`SimulationResult`, ends the run
+    early when it returns true (the result then has fewer than ``num_steps`` steps). Returns the per-step
+    :class:`SimulationResult` with an extra attribute ``joint_targets`` (``B x T x J``).
     """
     commands = np.asarray(commands, dtype=np.float64)
     b = sim.num_robots
@@ -309,6 +396,8 @@ def run_closed_loop(sim: BatchedSimulator, controller: RaibertController, comman
         results.append(out)
         targets.append(action)
         n += k
+        if stop_when is not None and stop_when(out):
+            break
     controller.pending_velocity_local, controller.pending_yaw_rate = velocity[:, :-1].copy(), yaw_rate[:, :-1].copy()
     merged = SimulationResult(**{
         name: np.concatenate([getattr(r, name) for r in results], axis=1)

@@ -115,6 +115,11 @@ class BatchedSimulator:
             (:func:`hierloco.envs.locomotion.reset_joint_noise`).
         seed: seeds the reset noise.
         nthread: simulation threads (default: the cores this process may use, :func:`available_cores`).
+        copy_robots: B variants of ``robot``, one per copy (the same joints and bodies; other gains, damping,
+            torque limits, masses, standing pose and height): copy ``i`` is simulated with the model of
+            ``copy_robots[i]``, stands in its pose at reset and falls by its thresholds. All copies still run in one
+            ``mujoco.rollout`` call, so a search over a robot's parameters is one batched simulation
+            (:mod:`hierloco.components.expert_tuning`). Not with disabled or limp legs, nor servo latency.
 
     Joint targets outside the joint range are clamped to it (:func:`hierloco.envs.locomotion.clamp_joint_targets`,
     as MuJoCo's control range would); NaN or infinite targets are refused. With ``robot.servo_latency`` the servos
@@ -124,7 +129,8 @@ class BatchedSimulator:
 
     def __init__(self, robot: str | RobotSpec, num_robots: int, *, disabled_legs: Sequence[str] = (),
                  init_joint_noise: float = 0.0, seed: int | None = None, nthread: int | None = None,
-                 obstacles: Sequence = (), limp_legs: Sequence[str] = ()):
+                 obstacles: Sequence = (), limp_legs: Sequence[str] = (),
+                 copy_robots: Sequence[RobotSpec] | None = None):
         if int(num_robots) < 1:
             raise ValueError(f"num_robots must be at least 1, got {num_robots}")
         self.robot = get_robot(robot)
@@ -157,7 +163,38 @@ class BatchedSimulator:
         self._standing_state = np.empty(self.nstate)
         mujoco.mj_getState(self.model, data, self._standing_state, STATE_SPEC)
         self.state = np.tile(self._standing_state, (self.num_robots, 1))
+        self._copy_models = self._copy_standing = self._copy_fall = None
+        if copy_robots is not None:
+            self._set_copy_robots(copy_robots)
         self.reset()
+
+    def _set_copy_robots(self, copy_robots: Sequence[RobotSpec]) -> None:
+        copies = [get_robot(r) for r in copy_robots]
+        if len(copies) != self.num_robots:
+            raise ValueError(f"copy_robots must give one robot per copy: {self.num_robots}, got {len(copies)}")
+        if self.disabled_legs or self.limp_legs or self.obstacles or self.latency_steps:
+            raise ValueError("copy_robots cannot be combined with disabled or limp legs, obstacles or servo latency")
+        compiled: dict[int, tuple] = {}
+        models, standing, falls = [], np.empty((self.num_robots, self.nstate)), np.empty((self.num_robots, 3))
+        for i, copy in enumerate(copies):
+            if id(copy) not in compiled:
+                if copy.joint_names != self.robot.joint_names or copy.servo_latency != self.robot.servo_latency:
+                    raise ValueError(f"copy_robots[{i}] ({copy.name!r}) must have the joints and servo latency of "
+                                     f"{self.robot.name!r}")
+                model = compile_model(copy)
+                if (model.nq, model.nv, model.nu, model.nsensordata) != (self.model.nq, self.model.nv, self.model.nu,
+                                                                         self.model.nsensordata):
+                    raise ValueError(f"copy_robots[{i}] ({copy.name!r}) compiles to a model of another size than "
+                                     f"{self.robot.name!r}'s")
+                data = mujoco.MjData(model)
+                data.qpos[:] = standing_qpos(model, copy)
+                state = np.empty(self.nstate)
+                mujoco.mj_getState(model, data, state, STATE_SPEC)
+                compiled[id(copy)] = (model, state, (copy.max_roll, copy.max_pitch, copy.min_height))
+            model, state, fall = compiled[id(copy)]
+            models.append(model)
+            standing[i], falls[i] = state, fall
+        self._copy_models, self._copy_standing, self._copy_fall = models, standing, falls
 
     # ------------------------------------------------------------------ state
     def reset(self, mask: np.ndarray | None = None) -> np.ndarray:
@@ -166,7 +203,7 @@ class BatchedSimulator:
         Returns the ``B x 5`` CoM state of every copy.
         """
         index = np.arange(self.num_robots) if mask is None else np.flatnonzero(np.asarray(mask, dtype=bool))
-        self.state[index] = self._standing_state
+        self.state[index] = self._standing_state if self._copy_standing is None else self._copy_standing[index]
         if self.latency_steps:
             self._in_flight[index] = self._standing
         if self.init_joint_noise > 0 and len(index):
@@ -226,7 +263,8 @@ class BatchedSimulator:
         if self.latency_steps:
             delayed = np.concatenate([self._in_flight, control], axis=1)
             control, self._in_flight = delayed[:, :control.shape[1]], delayed[:, control.shape[1]:]
-        states, sensors = self._pool.rollout(self.model, self._datas, self.state, control)
+        model = self.model if self._copy_models is None else self._copy_models
+        states, sensors = self._pool.rollout(model, self._datas, self.state, control)
         t0 = self.state[:, 0]
         self.state = states[:, -1].copy()
         return self._summarise(states, sensors, t0, num_steps)
@@ -243,7 +281,11 @@ class BatchedSimulator:
         quat = qpos[..., 3:7]
         rpy = quat_to_roll_pitch_yaw(quat)
         robot = self.robot
-        down = robot_has_fallen(robot, rpy[..., 0], rpy[..., 1], qpos[..., 2])
+        if self._copy_fall is None:
+            down = robot_has_fallen(robot, rpy[..., 0], rpy[..., 1], qpos[..., 2])
+        else:
+            roll_limit, pitch_limit, min_height = (self._copy_fall[:, i:i + 1] for i in range(3))
+            down = (np.abs(rpy[..., 0]) > roll_limit) | (np.abs(rpy[..., 1]) > pitch_limit) | (qpos[..., 2] < min_height)
         fallen = np.logical_or.accumulate(down, axis=1)
         com_state = com_state_from_base(qpos[..., 0:3], quat, qvel[..., 0:3])
         return SimulationResult(

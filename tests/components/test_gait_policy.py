@@ -1,12 +1,19 @@
 """The latent gait policy: fits the experts, reproduces their gaits in simulation, saves and loads safely."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import torch
 
 from hierloco.components.evaluation import check_gait_policy
 from hierloco.components.expert_library import build_expert_library
-from hierloco.components.gait_policy import LatentGaitPolicy, TrainedGaitPolicy, train_gait_policy
+from hierloco.components.gait_policy import (
+    LatentGaitPolicy,
+    TrainedGaitPolicy,
+    fit_gait_policy,
+    train_gait_policy,
+)
 from hierloco.components.low_level import LatentLowLevel
 from hierloco.io import ArtifactError
 
@@ -104,3 +111,51 @@ def test_net_is_a_torchrl_mlp_with_the_hand_built_layout_and_weights():
         torch.testing.assert_close(policy.net.state_dict()[key], value, rtol=0, atol=0)
     x = torch.randn(5, inputs)
     torch.testing.assert_close(policy.net(x), hand_built(x), rtol=0, atol=0)
+
+
+# ---------------------------------------------------------------------------------------------------- adaptive fit
+@pytest.fixture(scope="module")
+def small_daisy_library():
+    return build_expert_library("daisy", 6, settle_time=1.0, seed=0, progress=False)
+
+
+SHORT_FIT = dict(epochs=30, hidden=64, batch_size=100, latent_dim=3)  # too short a fit for Daisy's 6 experts
+
+
+def test_fit_without_adapting_is_the_plain_training(small_daisy_library):
+    """What the pipeline trains today is unchanged: ``adaptive=False`` is :func:`train_gait_policy`, bit for bit."""
+    fit = fit_gait_policy(small_daisy_library, adaptive=False, check_pairs=4, **SHORT_FIT)
+    plain = train_gait_policy(small_daisy_library.joint_targets, periods_per_action=1, progress=False, **SHORT_FIT)
+    assert [a["name"] for a in fit.attempts] == ["as configured"]
+    for key, value in plain.policy.state_dict().items():
+        torch.testing.assert_close(fit.trained.policy.state_dict()[key], value, rtol=0, atol=0)
+    torch.testing.assert_close(fit.trained.latents, plain.latents, rtol=0, atol=0)
+
+
+def test_fit_adapts_until_the_gait_policy_reproduces_its_experts(small_daisy_library):
+    """30 epochs of 64 units reproduce none of the 6 experts, nor do 60; twice the units and harmonics for 60 epochs
+    do (the bar here is half of them). Each fit is what the recipe trains with the overrides it records."""
+    fit = fit_gait_policy(small_daisy_library, min_reproduced_fraction=0.5, check_pairs=4, **SHORT_FIT)
+    names = [a["name"] for a in fit.attempts]
+    assert names == ["as configured", "longer", "wider"], fit.attempts
+    first, longer, wider = fit.attempts
+    assert first["reproduced_fraction"] < 0.5 and longer["reproduced_fraction"] < 0.5
+    assert first["overrides"] == {} and longer["overrides"] == {"epochs": 60}
+    assert wider["overrides"] == {"epochs": 60, "hidden": 128, "num_harmonics": 16}
+    assert fit.ok and fit.reproduced_fraction == wider["reproduced_fraction"] >= 0.5
+    assert fit.trained.policy.hidden == 128 and fit.experts_replayed_fraction == 1.0
+    assert fit.trained.metadata["adaptive_fit"]["kept"] == "wider"
+    # a budget of epochs stops the ladder before the wider fit
+    budget = fit_gait_policy(small_daisy_library, min_reproduced_fraction=0.5, check_pairs=4, budget_epochs=90,
+                             **SHORT_FIT)
+    assert [a["name"] for a in budget.attempts] == ["as configured", "longer"] and not budget.ok
+
+
+def test_fit_stops_when_the_experts_themselves_do_not_replay(small_daisy_library):
+    """Experts whose recorded velocities their own targets do not walk (here: recorded 0.3 m/s too fast) cannot be
+    reproduced by any fit: one fit, then the diagnosis."""
+    library = small_daisy_library
+    tampered = replace(library, velocity_local=library.velocity_local + 0.3)
+    fit = fit_gait_policy(tampered, check_pairs=4, **SHORT_FIT)
+    assert len(fit.attempts) == 1 and fit.experts_replayed_fraction == 0.0
+    assert fit.limited_by_experts and not fit.ok

@@ -355,17 +355,29 @@ def test_standing_height_is_derived_from_the_standing_pose():
 
 
 def test_gait_period_is_derived_from_the_robot_size():
-    """pi sqrt(h / g) rounded to a period that splits 100 steps: A1 0.52 s, Daisy 0.48 s, the 20 kg robot 0.61 s
-    all give 0.5 s (the built-ins keep the periods they were tuned with)."""
+    """0.6 pi sqrt(h / g) for a trot, twice that for a statically stable gait, rounded to a period that splits 100
+    steps: A1 (h = 0.27 m) 0.31 s -> 0.2 s (its own), the 20 kg robot (0.375 m) 0.37 s -> 0.5 s, Daisy's tripod
+    (0.23 m) 0.57 s -> 0.5 s (the built-ins keep the periods they were tuned with)."""
     robot = get_robot(str(FIXTURE_YAML))
     assert robot.gait_period == 0.5
-    assert derive_gait_period(A1) == 0.5 and derive_gait_period(DAISY) == 0.5
+    assert derive_gait_period(A1) == 0.2 and derive_gait_period(DAISY) == 0.5
     assert (A1.gait_period, DAISY.gait_period) == (0.2, 1.0)
     for r in (A1, DAISY, robot, make_toy_robot("site")):
         period = derive_gait_period(r)
         steps = round(period / 0.01)
         assert 0.2 <= period <= 1.0 and 100 % steps == 0 and steps % len(r.gait_groups) == 0
     assert admissible_gait_periods(2) == (0.04, 0.1, 0.2, 0.5, 1.0)
-    assert admissible_gait_periods(3) == ()  # three swing phases cannot split 100 steps into whole cycles
-    with pytest.raises(ValueError, match="no gait period splits 100 control steps"):
-        robot_from_mjcf(FIXTURE_XML, **_fixture_kwargs(gait_groups=[["FR"], ["FL", "RR"], ["RL"]]))
+    # three swing phases cannot split 100 steps exactly: the period ends with a step or two on all feet
+    assert admissible_gait_periods(3) == (0.1, 0.2, 0.25, 0.5, 1.0)
+    three = robot_from_mjcf(FIXTURE_XML, **_fixture_kwargs(gait_groups=[["FR"], ["FL", "RR"], ["RL"]]))
+    assert three.gait_period in admissible_gait_periods(3)
+    assert admissible_gait_periods(51) == ()  # fewer than 2 steps per swing phase
+    # the fixtures written for the robot check (docs/robots.md): period and foot lift from the hips' height
+    fixtures = REPO / "tests" / "fixtures"
+    derived = {name: (r.gait_period, r.swing_height) for name, r in (
+        (p.stem, get_robot(str(p))) for p in (fixtures / "quadruped9" / "quadruped9.yaml",
+                                              fixtures / "quadruped40" / "quadruped40.yaml",
+                                              fixtures / "hexapod10" / "hexapod10.yaml",
+                                              fixtures / "hexapod10" / "hexapod10_wave.yaml"))}
+    assert derived == {"quadruped9": (0.5, 0.045), "quadruped40": (0.5, 0.078), "hexapod10": (0.5, 0.026),
+                       "hexapod10_wave": (0.5, 0.026)}

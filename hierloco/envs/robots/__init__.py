@@ -31,6 +31,8 @@ from hierloco.envs.robots.spec import (
     compile_model,
     derive_gait_period,
     derive_standing_height,
+    derive_swing_height,
+    stance_legs,
     foot_geoms,
     joint_qpos_indices,
     joint_qvel_indices,
@@ -46,7 +48,7 @@ __all__ = [
     "A1", "DAISY", "ROBOTS", "CONTROL_TIMESTEP", "ENTRY_POINT_GROUP", "LOCK_PREFIX", "TOUCH_SENSOR_PREFIX",
     "TOUCH_SITE_PREFIX", "PHYSICS_STEPS_PER_CONTROL", "PHYSICS_TIMESTEP", "START_YAW", "STEPS_PER_ACTION", "Leg",
     "Obstacle", "RobotSpec", "admissible_gait_periods", "available_robots", "compile_model", "derive_gait_period",
-    "derive_standing_height", "foot_geoms", "get_robot", "joint_qpos_indices", "joint_qvel_indices",
+    "derive_standing_height", "derive_swing_height", "foot_geoms", "get_robot", "joint_qpos_indices", "joint_qvel_indices",
     "load_robot_yaml", "register_robot", "robot_fingerprint", "robot_from_mjcf", "robot_reference",
-    "standing_qpos", "HARDWARE", "hardware_options", "perturbed",
+    "stance_legs", "standing_qpos", "HARDWARE", "hardware_options", "perturbed",
 ]

@@ -80,7 +80,7 @@ def robot_from_mjcf(
     command_low: Sequence[float] = (-0.2, -0.2, -0.4),
     command_high: Sequence[float] = (0.2, 0.2, 0.4),
     rear_legs: Sequence[str] | None = None,
-    swing_height: float = 0.05,
+    swing_height: float | None = None,
     max_roll: float = 0.5,
     max_pitch: float = 0.5,
     kp: float | Sequence[float] | None = None,
@@ -111,7 +111,8 @@ def robot_from_mjcf(
         min_height: fall height in m (default: half the standing height).
         command_low, command_high: the command box ``(vx, vy, yaw_rate)`` in m/s, m/s, rad/s.
         rear_legs: legs disabled in the adverse setting (default: the last two legs).
-        swing_height: foot lift in m. max_roll, max_pitch: fall thresholds in rad.
+        swing_height: foot lift in m (default: derived from the hips' height,
+            :func:`hierloco.envs.robots.derive_swing_height`). max_roll, max_pitch: fall thresholds in rad.
         kp: position gain in N m / rad; required when the file drives its joints with torque motors.
         torque_limit: N m (default: the file's motor range). joint_damping: N m s / rad (default: the file's).
         description: a line for reports. source: where the description came from (default: the file's path).
@@ -181,7 +182,7 @@ def robot_from_mjcf(
         command_low=tuple(float(c) for c in command_low),
         command_high=tuple(float(c) for c in command_high),
         rear_legs=tuple(rear_legs) if rear_legs is not None else tuple(legs)[-2:],
-        swing_height=float(swing_height),
+        swing_height=None if swing_height is None else float(swing_height),
         max_roll=float(max_roll),
         max_pitch=float(max_pitch),
         description=description if description is not None else f"user MJCF robot {name}",

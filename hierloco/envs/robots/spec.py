@@ -18,7 +18,9 @@ uses, so that A1, Daisy and a user's own robot all look the same downstream:
   future (chained batched rollouts and step-by-step simulation agree exactly).
 
 What can be derived need not be given: the standing height comes from forward kinematics of the standing pose
-(:func:`derive_standing_height`), the gait period from the robot's size (:func:`derive_gait_period`).
+(:func:`derive_standing_height`), the gait period from the robot's size and gait (:func:`derive_gait_period`), the
+foot lift from the hips' height (:func:`derive_swing_height`); the rules come from searching the expert
+controller's parameters on seven robots (``docs/robots.md``).
 :func:`robot_fingerprint` digests a description and its compiled model, for cache keys.
 
 Example:
@@ -55,6 +57,9 @@ TOUCH_SITE_SCALE = 1.25  # touch site radius / foot geom bounding radius
 LOCK_PREFIX = "lock_"
 MIN_LEGS = 3
 MIN_SWING_STEPS = 2  # control steps per swing phase, at least
+STATIC_STANCE_LEGS = 3  # a gait with at least this many legs in stance at every moment is statically stable
+TROT_PERIOD_FACTOR = 0.6  # derived trot period: this times pi sqrt(h / g); twice that for statically stable gaits
+SWING_HEIGHT_FRACTION = 0.15  # derived foot lift: this fraction of the hips' height above the floor
 
 BUILTIN_SOURCE = "builtin"
 PYTHON_SOURCE = "python"
@@ -127,10 +132,10 @@ class RobotSpec:
         standing_height: height of the base above the floor in the standing pose, in m (default: derived,
             :func:`derive_standing_height`).
         gait_period: duration of one gait cycle in s; a latent action holds a whole number of them (default:
-            derived from the robot's size, :func:`derive_gait_period`).
+            derived from the robot's size and gait, :func:`derive_gait_period`).
         min_height: the robot has fallen when its base is lower than this, in m (default: half the standing
             height).
-        swing_height: foot lift of the expert gait, in m.
+        swing_height: foot lift of the expert gait, in m (``None``: derived, :func:`derive_swing_height`).
         max_roll, max_pitch: the robot has fallen when its roll or pitch exceeds these, in rad.
         kp: position gain per joint in N m / rad, used when the model drives its joints with torque motors
             (and for the actuators hierloco builds itself).
@@ -166,7 +171,7 @@ class RobotSpec:
     standing_height: float | None = None
     gait_period: float | None = None
     min_height: float | None = None
-    swing_height: float = 0.06
+    swing_height: float | None = 0.06
     max_roll: float = 0.5
     max_pitch: float = 0.5
     kp: tuple[float, ...] | None = None
@@ -211,8 +216,8 @@ class RobotSpec:
                                  f"got {values!r}")
         if any(lo > hi for lo, hi in zip(self.command_low, self.command_high)):
             raise ValueError(f"{where}: command_low {self.command_low} exceeds command_high {self.command_high}")
-        for name in ("swing_height", "max_roll", "max_pitch") + tuple(
-                n for n in ("standing_height", "gait_period") if getattr(self, n) is not None):
+        for name in ("max_roll", "max_pitch") + tuple(
+                n for n in ("standing_height", "gait_period", "swing_height") if getattr(self, n) is not None):
             value = getattr(self, name)
             if not (_finite(value) and value > 0):
                 raise ValueError(f"{where}: {name} must be a finite positive number, got {value!r}")
@@ -229,7 +234,7 @@ class RobotSpec:
         if self.min_height is not None and not (_finite(self.min_height) and self.min_height >= 0):
             raise ValueError(f"{where}: min_height must be a finite number >= 0, got {self.min_height!r}")
         # derive what was not given (one compiled model for both)
-        if self.standing_height is None or self.gait_period is None:
+        if self.standing_height is None or self.gait_period is None or self.swing_height is None:
             height, hip_height = _standing_geometry(self)
             if self.standing_height is None:
                 if not height > 0:
@@ -238,6 +243,11 @@ class RobotSpec:
                 object.__setattr__(self, "standing_height", float(height))
             if self.gait_period is None:
                 object.__setattr__(self, "gait_period", _period_for_hip_height(self, hip_height))
+            if self.swing_height is None:
+                if not hip_height > 0:
+                    raise ValueError(f"{where}: cannot derive swing_height: the legs' first joints are not above "
+                                     "the feet in the standing pose; give swing_height")
+                object.__setattr__(self, "swing_height", _swing_for_hip_height(hip_height))
         if self.min_height is None:
             object.__setattr__(self, "min_height", float(self.standing_height) / 2)
         if not self.standing_height > self.min_height:
@@ -604,15 +614,28 @@ def derive_standing_height(robot: RobotSpec) -> float:
 
 def admissible_gait_periods(num_groups: int, steps_per_action: int = STEPS_PER_ACTION) -> tuple[float, ...]:
     """Gait periods in s that the expert gaits can use: a whole number P of control steps that divides
-    ``steps_per_action`` (an action holds whole gait cycles) and splits into ``num_groups`` swing phases of at
-    least ``MIN_SWING_STEPS`` whole steps each.
+    ``steps_per_action`` (an action holds whole gait cycles) and gives each of the ``num_groups`` groups a swing
+    phase of ``P // num_groups >= MIN_SWING_STEPS`` whole steps. When some periods split exactly into the swing
+    phases (two, four or five groups in 100 steps), only those; otherwise (a wave gait: three or six groups) the
+    periods whose last ``P mod num_groups`` steps have every foot on the ground
+    (:class:`hierloco.components.experts.RaibertController`).
 
     Example:
         >>> admissible_gait_periods(2)
         (0.04, 0.1, 0.2, 0.5, 1.0)
+        >>> admissible_gait_periods(6)  # a hexapod's wave gait: 3, 4, 8 or 16 steps per swing
+        (0.2, 0.25, 0.5, 1.0)
     """
-    return tuple(round(p * CONTROL_TIMESTEP, 10) for p in range(1, int(steps_per_action) + 1)
-                 if steps_per_action % p == 0 and p % num_groups == 0 and p // num_groups >= MIN_SWING_STEPS)
+    divisors = [p for p in range(1, int(steps_per_action) + 1)
+                if steps_per_action % p == 0 and p // num_groups >= MIN_SWING_STEPS]
+    exact = [p for p in divisors if p % num_groups == 0]
+    return tuple(round(p * CONTROL_TIMESTEP, 10) for p in (exact or divisors))
+
+
+def stance_legs(robot: RobotSpec) -> int:
+    """The fewest legs in stance at any moment of the robot's gait: all legs but the largest gait group (2 for a
+    trot, 3 for a tripod, 5 for a hexapod's wave gait)."""
+    return len(robot.legs) - max(len(group) for group in robot.gait_groups)
 
 
 def _period_for_hip_height(robot: RobotSpec, hip_height: float, steps_per_action: int = STEPS_PER_ACTION) -> float:
@@ -623,26 +646,45 @@ def _period_for_hip_height(robot: RobotSpec, hip_height: float, steps_per_action
     if not hip_height > 0:
         raise ValueError(f"robot {robot.name!r}: cannot derive gait_period: the legs' first joints are not above the "
                          "feet in the standing pose; give gait_period")
-    target = math.pi * math.sqrt(hip_height / GRAVITY)
+    target = TROT_PERIOD_FACTOR * math.pi * math.sqrt(hip_height / GRAVITY)
+    if stance_legs(robot) >= STATIC_STANCE_LEGS:
+        target *= 2
     return min(periods, key=lambda period: abs(math.log(period / target)))
 
 
 def derive_gait_period(robot: RobotSpec, steps_per_action: int = STEPS_PER_ACTION) -> float:
-    """A gait period in s suited to the robot's size.
+    """A gait period in s suited to the robot's size and gait.
 
-    The rule: the period is ``pi * sqrt(h / g)`` (half the swing period of a pendulum as long as the legs are
-    high; by dynamic similarity at equal Froude number, gait times scale with ``sqrt(h / g)``), where ``h`` is the
-    mean height of the legs' first joints above the floor in the standing pose, rounded to the nearest (in ratio)
-    of :func:`admissible_gait_periods`, so that a latent action of ``steps_per_action`` control steps holds whole
-    gait cycles and each swing phase is a whole number of steps. A1 (h = 0.27 m) and Daisy (0.23 m) get 0.5 s,
-    a 20 kg quadruped with 0.25 m leg links (0.37 m) too; a robot with 1 m legs gets 1 s.
+    The rule, from searching the expert controller's parameters (``hierloco-robot-check``) on seven robots
+    (``docs/robots.md``): ``T = 0.6 pi sqrt(h / g)`` for a gait that balances on two legs (a trot), twice that for
+    a statically stable one (at least ``STATIC_STANCE_LEGS`` legs in stance at every moment: a tripod, a wave
+    gait), ``h`` the mean height of the legs' first joints above the floor in the standing pose (gait times scale
+    with ``sqrt(h / g)`` at equal Froude number), rounded to the nearest (in ratio) of
+    :func:`admissible_gait_periods`. Trotting quadrupeds with hips lower than 0.28 m get 0.2 s, taller ones 0.5 s
+    (1 s only above 1.4 m); hexapods with hips from 0.07 to 0.35 m get 0.5 s.
 
     Example:
         >>> from hierloco.envs.robots import A1, DAISY
-        >>> derive_gait_period(A1), derive_gait_period(DAISY)
-        (0.5, 0.5)
+        >>> derive_gait_period(A1), derive_gait_period(DAISY)  # A1 is tuned at 0.2 s, Daisy at 1 s
+        (0.2, 0.5)
     """
     return _period_for_hip_height(robot, _standing_geometry(robot)[1], steps_per_action)
+
+
+def _swing_for_hip_height(hip_height: float) -> float:
+    return round(SWING_HEIGHT_FRACTION * hip_height, 3)
+
+
+def derive_swing_height(robot: RobotSpec) -> float:
+    """The foot lift in m: ``SWING_HEIGHT_FRACTION`` of the hips' height above the floor in the standing pose,
+    rounded to the mm (``docs/robots.md``).
+
+    Example:
+        >>> from hierloco.envs.robots import A1
+        >>> derive_swing_height(A1)  # A1 is tuned at 0.06 m
+        0.04
+    """
+    return _swing_for_hip_height(_standing_geometry(robot)[1])
 
 
 # ---------------------------------------------------------------------------------------------------- fingerprint

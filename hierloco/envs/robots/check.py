@@ -1,0 +1,433 @@
+"""The robot check: is a description fit to walk, and with which expert-controller parameters (``docs/robots.md``).
+
+Two parts:
+
+- :func:`description_problems` reads the description alone, in milliseconds (forward kinematics and statics of the
+  standing pose, no simulation): the standing pose inside the joint limits, every foot well below its hip and on
+  the floor, and the motors strong enough to hold the robot's weight on the legs a gait leaves in stance. Each
+  problem is one line with the numbers and the fix. :func:`hierloco.components.expert_library.build_expert_library`
+  runs it first, so a folded pose is refused at once instead of grinding in leg IK.
+- the command line (``python -m hierloco.envs.robots.check robot.yaml``, or ``hierloco-robot-check``) runs those
+  checks, then searches the expert controller's free parameters for experts that walk as commanded and a latent
+  gait policy that reproduces them (:func:`hierloco.components.expert_tuning.tune_expert_parameters`), and prints
+  the parameters found as YAML lines to paste into the robot's file, with a per-axis tracking table and the gait
+  policy's reproduction. Exit status 0 when found, 2 otherwise (and for bad input: one ``error: ...`` line).
+
+Example:
+    >>> from hierloco.envs.robots import get_robot
+    >>> description_problems(get_robot("a1"))
+    []
+    >>> folded = get_robot("a1").replace(standing_pose=(0.0, 2.6, -2.6) * 4, standing_height=None, min_height=None)
+    >>> print(description_problems(folded)[0])  # doctest: +ELLIPSIS
+    standing pose: the feet are only 0.0... m below their hips (legs FR, FL, RR, RL; ...
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from hierloco.envs.robots.spec import (
+    RobotSpec,
+    _geom_bottom,
+    compile_model,
+    foot_geoms,
+    joint_qpos_indices,
+    stance_legs,
+)
+
+MIN_FOOT_DROP = 0.25  # a foot below its hip by at least this fraction of the leg's reach, in the standing pose
+FOOT_DROP_SUGGESTED = 0.6  # the suggested pose puts the feet this fraction of the reach below the hips
+FLOOR_TOLERANCE = 0.01  # m: a foot on the floor has its bottom within this of the floor (standing pose)
+MAX_STATIC_TORQUE = 0.75  # static torque holding the robot on its stance legs, as a fraction of the torque limit
+MAX_STATIC_SAG = 0.25  # rad: a servo holding that torque is off its target by torque / kp, at most this
+LIMIT_MARGIN = 1e-6  # rad
+
+
+@dataclass(frozen=True)
+class LegStatics:
+    """One leg in the standing pose, with the base level at the description's standing height.
+
+    Attributes:
+        leg: the leg's name.
+        hip_height: m, the leg's first joint above the floor.
+        foot_height: m, the bottom of the foot's collision geom above the floor (0: touching it).
+        foot_drop: m, how far the foot (its site) is below the first joint.
+        reach: m, the leg's length: the distances from joint to joint and from the last joint to the foot, summed.
+        static_torque: N m per joint of the leg, holding its share of the weight (see :class:`StandingStatics`).
+        torque_limit: N m per joint (``inf`` for a motor without one).
+        kp: N m / rad per joint, the servos' stiffness (a servo holding ``static_torque`` is off its target by
+            ``static_torque / kp``).
+    """
+
+    leg: str
+    hip_height: float
+    foot_height: float
+    foot_drop: float
+    reach: float
+    static_torque: tuple[float, ...]
+    torque_limit: tuple[float, ...]
+    kp: tuple[float, ...] = ()
+
+
+@dataclass(frozen=True)
+class StandingStatics:
+    """The robot standing: its mass, the fewest legs its gait leaves in stance, and every leg's numbers.
+
+    Each stance leg carries ``mass * g / stance_legs`` upward at its foot; ``static_torque`` is what each joint then
+    exerts (``|(axis x (foot - anchor)) . F|``), a lower bound on what walking asks of it.
+    """
+
+    robot: str
+    mass: float
+    standing_height: float
+    feet_on_floor_height: float
+    stance_legs: int
+    legs: tuple[LegStatics, ...]
+
+    @property
+    def load_per_foot(self) -> float:
+        """N on each stance foot."""
+        return self.mass * 9.81 / self.stance_legs
+
+
+def standing_statics(robot: RobotSpec, model: mujoco.MjModel | None = None) -> StandingStatics:
+    """The numbers :func:`description_problems` judges (forward kinematics of the standing pose, no simulation).
+
+    Example:
+        >>> from hierloco.envs.robots import get_robot
+        >>> statics = standing_statics(get_robot("a1"))
+        >>> statics.stance_legs, round(statics.legs[0].foot_drop, 3)
+        (2, 0.249)
+    """
+    model = compile_model(robot) if model is None else model
+    data = mujoco.MjData(model)
+    data.qpos[:] = model.qpos0
+    data.qpos[0:7] = (0.0, 0.0, float(robot.standing_height), 1.0, 0.0, 0.0, 0.0)
+    data.qpos[joint_qpos_indices(model, robot)] = robot.standing_pose
+    mujoco.mj_kinematics(model, data)
+    feet = foot_geoms(model, robot)
+    bottoms = [_geom_bottom(model, data, g) for g in feet]
+    mass = float(model.body_mass[1:].sum())
+    stance = max(stance_legs(robot), 1)
+    force = np.array([0.0, 0.0, mass * 9.81 / stance])
+    limited = model.actuator_forcelimited.astype(bool) | (model.actuator_forcerange[:, 1] > model.actuator_forcerange[:, 0])
+    limits = np.where(limited, np.abs(model.actuator_forcerange).max(1) * np.abs(model.actuator_gear[:, 0]), np.inf)
+    legs, start = [], 0
+    for leg, bottom in zip(robot.legs, bottoms):
+        joints = [model.joint(name).id for name in leg.joints]
+        anchors = data.xanchor[joints]
+        axes = data.xaxis[joints]
+        foot = data.site_xpos[model.site(leg.foot_site).id]
+        points = np.concatenate([anchors, foot[None]])
+        reach = float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum())
+        torque = np.abs(np.einsum("jk,k->j", np.cross(axes, foot - anchors), force))
+        n = len(joints)
+        legs.append(LegStatics(leg=leg.name, hip_height=float(anchors[0, 2]), foot_height=float(bottom),
+                               foot_drop=float(anchors[0, 2] - foot[2]), reach=reach,
+                               static_torque=tuple(float(t) for t in torque),
+                               torque_limit=tuple(float(t) for t in limits[start:start + n]),
+                               kp=tuple(float(k) for k in model.actuator_gainprm[start:start + n, 0])))
+        start += n
+    derived = float(robot.standing_height) - min(bottoms)
+    return StandingStatics(robot=robot.name, mass=mass, standing_height=float(robot.standing_height),
+                           feet_on_floor_height=derived, stance_legs=stance, legs=tuple(legs))
+
+
+def _legs(names) -> str:
+    names = list(names)
+    return ", ".join(names[:6]) + (f" and {len(names) - 6} more" if len(names) > 6 else "")
+
+
+def _numbers(values, digits: int = 2) -> str:
+    return "[" + ", ".join(f"{v:.{digits}f}" for v in values) + "]"
+
+
+def suggested_standing_pose(robot: RobotSpec, drop_fraction: float = FOOT_DROP_SUGGESTED) -> tuple[float, ...] | None:
+    """A standing pose with every foot ``drop_fraction`` of its leg's reach below its hip, straight under where
+    the foot is now (inverse kinematics from the given pose, within the joint limits), or ``None`` when the legs
+    cannot reach it within 1 cm.
+
+    Example:
+        >>> from hierloco.envs.robots import get_robot
+        >>> pose = suggested_standing_pose(get_robot("a1"))
+        >>> len(pose)
+        12
+    """
+    from hierloco.components.kinematics import LegKinematics
+
+    statics = standing_statics(robot)
+    kinematics = LegKinematics(robot)
+    q0 = np.asarray(robot.standing_pose, dtype=float)
+    feet = kinematics.forward(q0)  # L x 3 in the base frame
+    hips = np.array([leg.hip_height for leg in statics.legs]) - robot.standing_height  # base frame z
+    target = feet.copy()
+    target[:, 2] = hips - drop_fraction * np.array([leg.reach for leg in statics.legs])
+    q = kinematics.inverse(target, q0)
+    if np.abs(kinematics.forward(q) - target).max() > 0.01:
+        return None
+    return tuple(float(v) for v in q)
+
+
+def _pose_text(robot: RobotSpec, pose) -> str:
+    per_leg = [tuple(round(v, 2) for v in pose[s]) for s in _leg_slices(robot)]
+    if len(set(per_leg)) == 1:
+        return _numbers(per_leg[0])
+    return "{" + ", ".join(f"{leg.name}: {_numbers(angles)}" for leg, angles in zip(robot.legs, per_leg)) + "}"
+
+
+def _leg_slices(robot: RobotSpec) -> list[slice]:
+    slices, start = [], 0
+    for leg in robot.legs:
+        slices.append(slice(start, start + len(leg.joints)))
+        start += len(leg.joints)
+    return slices
+
+
+def description_problems(robot: RobotSpec) -> list[str]:
+    """What in ``robot``'s description keeps it from standing and walking, one line per problem, with the numbers
+    and the fix; empty when there is none. Milliseconds: forward kinematics and statics of the standing pose.
+
+    Checks (``docs/robots.md``):
+
+    - the standing pose is inside every joint's range;
+    - every foot is at least ``MIN_FOOT_DROP`` of its leg's reach below its hip (a folded pose cannot carry the body
+      nor lift a foot);
+    - every foot touches the floor at the standing height (within ``FLOOR_TOLERANCE``);
+    - standing on the fewest legs the gait keeps in stance, no joint needs more than ``MAX_STATIC_TORQUE`` of its
+      torque limit to hold the weight (walking adds to it), nor sags more than ``MAX_STATIC_SAG`` under it (a servo
+      of gain kp is off its target by torque / kp).
+
+    Example:
+        >>> from hierloco.envs.robots import get_robot
+        >>> description_problems(get_robot("daisy"))
+        []
+    """
+    model = compile_model(robot)
+    problems = []
+    # joint limits
+    outside = []
+    for name, angle in zip(robot.joint_names, robot.standing_pose):
+        joint = model.joint(name)
+        if model.jnt_limited[joint.id]:
+            low, high = model.jnt_range[joint.id]
+            if not low - LIMIT_MARGIN <= angle <= high + LIMIT_MARGIN:
+                outside.append((name, angle, low, high))
+    if outside:
+        name, angle, low, high = outside[0]
+        others = f" (and {len(outside) - 1} more joints)" if len(outside) > 1 else ""
+        problems.append(f"standing pose: joint {name!r} at {angle:+.3f} rad is outside its range "
+                        f"[{low:+.3f}, {high:+.3f}] rad{others}: give standing_pose angles inside the joint ranges "
+                        f"(e.g. {min(max(angle, low + 0.05 * (high - low)), high - 0.05 * (high - low)):+.3f} for "
+                        f"{name!r})")
+    statics = standing_statics(robot, model)
+    # folded legs
+    folded = [leg for leg in statics.legs if leg.foot_drop < MIN_FOOT_DROP * leg.reach]
+    if folded:
+        worst = min(folded, key=lambda leg: leg.foot_drop / leg.reach)
+        suggestion = suggested_standing_pose(robot)
+        fix = (f"give a standing_pose with the feet further down, e.g. {_pose_text(robot, suggestion)} (feet "
+               f"{FOOT_DROP_SUGGESTED:.0%} of the reach below the hips)" if suggestion is not None else
+               "give a standing_pose with the legs extended below the hips")
+        problems.append(
+            f"standing pose: the feet are only {worst.foot_drop:.3f} m below their hips (legs {_legs(l.leg for l in folded)}; "
+            f"leg {worst.leg}: hip {worst.hip_height:.3f} m, foot {worst.hip_height - worst.foot_drop:.3f} m above "
+            f"the floor, with {worst.reach:.3f} m of leg), need at least {MIN_FOOT_DROP * worst.reach:.3f} m "
+            f"({MIN_FOOT_DROP:.0%} of the reach): a folded leg can neither carry the body nor lift its foot; {fix}")
+    # feet on the floor
+    low_feet = [leg for leg in statics.legs if leg.foot_height < -FLOOR_TOLERANCE]
+    high_feet = [leg for leg in statics.legs if leg.foot_height > FLOOR_TOLERANCE]
+    if low_feet or high_feet:
+        heights = {leg.leg: leg.foot_height for leg in statics.legs}
+        lowest = min(heights.values())
+        if max(heights.values()) - lowest > FLOOR_TOLERANCE:
+            problems.append(
+                f"standing pose: the feet are not level: bottoms at {_numbers(heights.values(), 3)} m for legs "
+                f"{_legs(heights)} (at most {FLOOR_TOLERANCE} m apart): give a standing_pose that puts every foot "
+                "on the floor (the same leg angles for legs built alike)")
+        else:
+            problems.append(
+                f"standing_height: at {statics.standing_height:.3f} m the feet are "
+                f"{abs(lowest):.3f} m {'below' if lowest < 0 else 'above'} the floor: give standing_height: "
+                f"{statics.feet_on_floor_height:.3f} (the feet on the floor), or leave it out to derive it")
+    # torques
+    overloaded = []
+    for leg in statics.legs:
+        for name, torque, limit in zip(next(l.joints for l in robot.legs if l.name == leg.leg), leg.static_torque,
+                                       leg.torque_limit):
+            if torque > MAX_STATIC_TORQUE * limit:
+                overloaded.append((torque / limit, name, torque, limit))
+    if overloaded:
+        ratio, name, torque, limit = max(overloaded)
+        problems.append(
+            f"torque: holding {statics.mass:.1f} kg on {statics.stance_legs} stance legs "
+            f"({statics.load_per_foot:.0f} N per foot) takes {torque:.1f} N m at joint {name!r}, {ratio:.0%} of its "
+            f"{limit:.1f} N m limit ({len(overloaded)} joints above {MAX_STATIC_TORQUE:.0%}; walking needs more): give "
+            f"torque_limit of at least {torque / MAX_STATIC_TORQUE:.1f} N m for it, a lighter robot, or a pose "
+            "with the feet closer under the joints")
+    sagging = []
+    for leg in statics.legs:
+        names = next(l.joints for l in robot.legs if l.name == leg.leg)
+        for name, torque, kp in zip(names, leg.static_torque, leg.kp):
+            if kp > 0 and torque / kp > MAX_STATIC_SAG:
+                sagging.append((torque / kp, name, torque, kp))
+    if sagging:
+        sag, name, torque, kp = max(sagging)
+        problems.append(
+            f"kp: holding {statics.mass:.1f} kg on {statics.stance_legs} stance legs, joint {name!r} sags "
+            f"{sag:.2f} rad off its target ({torque:.1f} N m at kp {kp:g} N m/rad; {len(sagging)} joints over "
+            f"{MAX_STATIC_SAG} rad): give kp of at least {torque / (0.5 * MAX_STATIC_SAG):.0f} N m/rad (a sag of "
+            f"{0.5 * MAX_STATIC_SAG} rad)")
+    return problems
+
+
+
+
+# ---------------------------------------------------------------------------------------------------- command line
+EXIT_FOUND, EXIT_NOT_FOUND = 0, 2
+
+
+def description_summary(robot: RobotSpec) -> str:
+    """One line of the numbers :func:`description_problems` judged, for a description that passes."""
+    statics = standing_statics(robot)
+    drop = min(leg.foot_drop / leg.reach for leg in statics.legs)
+    ratio = max((t / limit for leg in statics.legs for t, limit in zip(leg.static_torque, leg.torque_limit)),
+                default=0.0)
+    sag = max((t / kp for leg in statics.legs for t, kp in zip(leg.static_torque, leg.kp) if kp > 0), default=0.0)
+    return (f"standing pose inside the joint limits; feet {min(leg.foot_drop for leg in statics.legs):.3f} m or more "
+            f"below the hips ({drop:.0%} of the reach, need {MIN_FOOT_DROP:.0%}) and on the floor; holding "
+            f"{statics.mass:.1f} kg on {statics.stance_legs} stance legs takes at most {ratio:.0%} of a joint's torque "
+            f"limit (need {MAX_STATIC_TORQUE:.0%} or less) and the servos sag {sag:.2f} rad at most (need "
+            f"{MAX_STATIC_SAG} or less)")
+
+
+def tracking_table(axes) -> list[str]:
+    """A Markdown table of :class:`hierloco.components.expert_library.AxisTracking` rows."""
+    lines = ["| axis | commanded | achieved | achieved ~ slope x command + offset | reach towards low / high edge |"
+             " ok |", "|---|---|---|---|---|---|"]
+    for a in axes:
+        lines.append(f"| {a.axis} ({a.unit}) | {a.command_low:+.2f} .. {a.command_high:+.2f} | {a.achieved_low:+.2f} .."
+                     f" {a.achieved_high:+.2f} | {a.slope:.2f} x command {a.offset:+.3f} | {a.reach_low:.0%} / "
+                     f"{a.reach_high:.0%} (need {a.min_reach:.0%}) | {'yes' if a.ok else 'no'} |")
+    return lines
+
+
+def main(argv=None) -> int:
+    """``hierloco-robot-check ROBOT``: the description's problems in milliseconds, then the search (see the module
+    docstring). Returns the exit status: 0 found, 2 not found or bad input."""
+    import argparse
+    import sys
+    import time
+
+    parser = argparse.ArgumentParser(
+        prog="hierloco-robot-check",
+        description="Check a robot description and search the expert controller's parameters for experts that walk "
+                    "as commanded and a gait policy that reproduces them (docs/robots.md).")
+    parser.add_argument("robot", help="path/to/robot.yaml (or a registered robot name)")
+    parser.add_argument("--budget", type=float, default=300.0, help="s of search and verification (default 300): "
+                        "no stage or verification starts after it; the one running finishes")
+    parser.add_argument("--experts", type=int, default=30, help="experts in the verified library (default 30, the "
+                        "small preset's)")
+    parser.add_argument("--settle-time", type=float, default=3.0, help="s each verified expert walks before it is "
+                        "recorded (default 3)")
+    parser.add_argument("--epochs", type=int, default=150, help="gait-policy epochs (default 150, the small preset's)")
+    parser.add_argument("--hidden", type=int, default=512, help="gait-policy hidden units (default 512)")
+    parser.add_argument("--latent-dim", type=int, default=3, help="latent dimension (default 3)")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--description-only", action="store_true", help="check the description and stop")
+    parser.add_argument("--no-verify", action="store_true", help="screen only: no expert library nor gait policy")
+    args = parser.parse_args(argv)
+
+    def fail(message: str) -> int:
+        print(f"error: {' '.join(str(message).split())}", file=sys.stderr)
+        return EXIT_NOT_FOUND
+
+    for name in ("budget", "settle_time"):
+        if not (math.isfinite(getattr(args, name)) and getattr(args, name) > 0):
+            return fail(f"--{name.replace('_', '-')} must be a positive number of s, got {getattr(args, name)}")
+    for name in ("experts", "epochs", "hidden"):
+        if getattr(args, name) < 1:
+            return fail(f"--{name} must be a positive whole number, got {getattr(args, name)}")
+    from hierloco.envs.robots import get_robot
+
+    start = time.perf_counter()
+    try:
+        robot = get_robot(args.robot)
+        problems = description_problems(robot)
+    except (ValueError, OSError) as error:
+        return fail(error)
+    where = robot.reference
+    print(f"robot {robot.name} ({where}): {len(robot.legs)} legs, gait groups "
+          f"{[list(g) for g in robot.gait_groups]}; now gait_period {robot.gait_period:g} s, standing_height "
+          f"{robot.standing_height:.3f} m, swing_height {robot.swing_height:g} m")
+    elapsed = time.perf_counter() - start
+    if problems:
+        print(f"description: {len(problems)} problem{'s' if len(problems) > 1 else ''} ({elapsed:.2f} s):")
+        for line in problems:
+            print(f"  - {line}")
+        return EXIT_NOT_FOUND
+    print(f"description: ok ({elapsed:.2f} s): {description_summary(robot)}")
+    if args.description_only:
+        return EXIT_FOUND
+    from hierloco.components.expert_tuning import tune_expert_parameters
+
+    print(f"search (budget {args.budget:g} s):", flush=True)
+    result = tune_expert_parameters(
+        robot, budget_seconds=args.budget, num_experts=args.experts, settle_time=args.settle_time,
+        policy={"epochs": args.epochs, "hidden": args.hidden, "latent_dim": args.latent_dim},
+        verify=not args.no_verify, seed=args.seed, log=lambda line: print(line, flush=True))
+    params = result.params
+    if params is None:
+        print(f"not found in {result.seconds:.0f} s:")
+        for line in result.limits:
+            print(f"  - {line}")
+        return EXIT_NOT_FOUND
+    verified = result.verified
+    shown = result.verifications[-1] if result.verifications else None
+    if shown is not None and shown.report is not None:
+        print(f"\ntracking of the {shown.report.num_experts} experts verified ({shown.candidate.label}):")
+        print("\n".join(tracking_table(shown.report.axes)))
+        if shown.replayed_fraction is not None:
+            print(f"experts' own targets replayed open loop: {shown.replayed_fraction:.0%} within 0.05 m/s")
+        if shown.reproduced_fraction is not None:
+            print(f"gait policy: reproduces {shown.reproduced_fraction:.0%} of the experts within 0.05 m/s in "
+                  f"simulation (need {result.min_reproduced_fraction:.0%})")
+    elif result.best is not None and result.best.axes:
+        print(f"\ntracking of the {result.best.num_commands} screened experts ({result.best.candidate.label}):")
+        print("\n".join(tracking_table(result.best.axes)))
+        print(f"experts' own targets replayed open loop: {result.best.replayed_fraction:.0%} within 0.05 m/s")
+    changed = params.changed(result.reference)
+    lines = params.yaml_lines(robot, only=changed)
+    if result.found:
+        what = "verified" if verified is not None else "screened only (--no-verify)"
+        same = "" if changed else "; the description's own parameters walk, these lines pin the derived values"
+        print(f"\nfound in {result.seconds:.0f} s ({what}{same}); paste into {where} (replacing these keys):")
+        print("\n".join(lines))
+        adapted = verified.policy_adapted if verified is not None else None
+        if adapted is not None:
+            overrides = " ".join(f"policy.{key}={value:g}" for key, value in adapted["overrides"].items())
+            print(f"# and train the gait policy with the recipe overrides {overrides} (the configured "
+                  f"{args.epochs} epochs of {args.hidden} units reproduce "
+                  f"{verified.policy_attempts[0]['reproduced_fraction']:.0%} of the experts, this fit "
+                  f"{adapted['reproduced_fraction']:.0%})")
+        return EXIT_FOUND
+    print(f"\nnot found in {result.seconds:.0f} s; the best candidate: {result.best.candidate.label}")
+    print("what limits it:")
+    for line in result.limits:
+        print(f"  - {line}")
+    print("its parameters:")
+    print("\n".join(lines))
+    return EXIT_NOT_FOUND
+
+
+__all__ = ["EXIT_FOUND", "EXIT_NOT_FOUND", "FLOOR_TOLERANCE", "LegStatics", "MAX_STATIC_SAG", "MAX_STATIC_TORQUE",
+           "MIN_FOOT_DROP",
+           "StandingStatics", "description_problems", "description_summary", "main", "standing_statics",
+           "suggested_standing_pose", "tracking_table"]
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
