@@ -291,7 +291,8 @@ class CandidateScore:
         if not self.num_commands:
             return -math.inf
         walked = 1.0 - self.fell / self.num_commands
-        return min(self.worst_reach / self.min_reach, self.replayed_fraction / self.min_reproduced_fraction) * walked
+        replay = self.replayed_fraction / self.min_reproduced_fraction if self.min_reproduced_fraction > 0 else 1.0
+        return min(self.worst_reach / self.min_reach, replay) * walked  # a bar of 0 asks nothing of the replay
 
     @property
     def passes(self) -> bool:

@@ -185,6 +185,10 @@ def check_experts(c: Checker, robot, *, library: bool = True) -> None:
     if library:
         c.integer("experts.num_experts")
         c.positive("experts.settle_time")
+        if not isinstance(get(c.cfg, "experts.tune", False), bool):
+            c.fail(f"experts.tune must be true or false, got {get(c.cfg, 'experts.tune')!r}")
+        if get(c.cfg, "experts.tune_budget") is not None:
+            c.positive("experts.tune_budget")
         box = {k: get(c.cfg, f"experts.{k}") for k in ("command_low", "command_high")}
         if robot is not None and any(v is not None for v in box.values()):
             from hierloco.components.expert_library import command_box
@@ -216,6 +220,10 @@ def check_policy(c: Checker) -> None:
     dim = get(c.cfg, "policy.latent_dim")
     if not (_is_int(dim) and 1 <= dim <= 4):
         c.fail(f"policy.latent_dim must be 2, 3 or 4 (1 also works), got {dim!r}")
+    if not isinstance(get(c.cfg, "policy.adaptive", False), bool):
+        c.fail(f"policy.adaptive must be true or false, got {get(c.cfg, 'policy.adaptive')!r}")
+    if get(c.cfg, "policy.budget_epochs") is not None:
+        c.integer("policy.budget_epochs")
 
 
 DYNAMICS_KEYS = ("num_transitions", "num_robots", "episode_length", "hidden", "lr", "batch_size", "holdout",

@@ -145,6 +145,7 @@ class Run:
         self.reports: dict = {}
         self.evaluations: dict[tuple[str, str], tuple[Stage, TaskEvaluation]] = {}
         self.start = time.perf_counter()
+        self._robot_checked = False
 
     @property
     def path(self) -> Path:
@@ -167,6 +168,8 @@ class Run:
         build = build or stage.build
         if self.evaluating and stage.trains and not self.dir.check(stage.name, stage.key, stage.filename):
             raise ConfigError(f"stage {stage.name!r} is not finished in {self.path}: train the run first (train.py)")
+        if stage.trains and not self._robot_checked and not self.dir.check(stage.name, stage.key, stage.filename):
+            build = self._checking_the_robot_first(build)
         timings: dict = {}
         try:
             with temporaries_in(self.path):
@@ -190,6 +193,22 @@ class Run:
             summary = getattr(artifact, "summary", None)  # what the artifact says of itself, else its metadata
             self.reports[stage.name] = summary() if callable(summary) else dict(getattr(artifact, "metadata", artifact))
         return artifact
+
+    def _checking_the_robot_first(self, build: Callable) -> Callable:
+        """``build``, preceded (once per run) by the robot description's checks, which take milliseconds: a robot
+        that cannot stand (pose outside its joint limits, feet that do not reach the floor, motors too weak for its
+        weight) is a finding of the first stage that would simulate it (``hierloco.envs.robots.check``)."""
+        def checked(*args):
+            from hierloco.envs.robots.check import RobotDescriptionError, description_problems
+
+            self._robot_checked = True
+            problems = description_problems(self.robot)
+            if problems:
+                raise RobotDescriptionError(f"robot {self.robot.name!r} cannot walk as described: "
+                                            + "; ".join(problems))
+            return build(*args)
+
+        return checked
 
     def plan_stage(self, name: str) -> Stage | None:
         return next((stage for stage in self.plan.stages() if stage.name == name), None)
@@ -291,12 +310,15 @@ def open_run(cfg: DictConfig, method: str, plan: Callable, checks: Callable | No
     from hierloco.pipeline.config import prepare
 
     robot = prepare(cfg, checks)
+    directory = RunDirectory(resolve_run_dir(cfg, method, robot))
+    multirun = in_multirun()
+    tuning = None
+    if cfg.get("experts") is not None and cfg.experts.get("tune"):  # the robot's expert parameters searched first
+        robot, tuning = tune_first(cfg, method, robot, directory, multirun)
     planned = plan(cfg, robot)
     if not isinstance(planned, Plan):
         planned = Plan(stages=list(planned))
-    directory = RunDirectory(resolve_run_dir(cfg, method, robot))
     specs = [stage.spec for stage in planned.stages()]
-    multirun = in_multirun()
     if not multirun:
         directory.check_free()  # another process's run is named first: its stages may not match ours yet
     check_owner(directory, method, cfg, robot)
@@ -320,7 +342,10 @@ def open_run(cfg: DictConfig, method: str, plan: Callable, checks: Callable | No
                         "robot_profile": cfg.get("robot_profile", "own"), "seed": int(cfg.seed),
                         "settings": list(cfg.settings),
                         "planner": section(cfg, "planner") if "planner" in cfg else {},
-                        **(manifest(cfg, robot) if manifest is not None else {})}
+                        **(manifest(cfg, robot) if manifest is not None else {}),
+                        **({"expert_tuning": {key: tuning[key] for key in ("parameters", "changed", "yaml",
+                                                                            "tuned_fingerprint", "policy_overrides")}}
+                           if tuning is not None else {})}
                 with temporaries_in(directory.path):
                     write_text(directory.path / MANIFEST, json.dumps(info, indent=2))
             logger = open_logger(cfg, method, robot, directory.path)
@@ -334,6 +359,31 @@ def open_run(cfg: DictConfig, method: str, plan: Callable, checks: Callable | No
         raise
     torch.manual_seed(cfg.seed)
     return Run(cfg, method, robot, planned, directory, logger, evaluation_out=evaluation_out)
+
+
+def tune_first(cfg, method: str, robot, directory: RunDirectory, multirun: bool):
+    """``experts.tune=true``: the cached search of the robot's expert parameters (:mod:`hierloco.pipeline.tuning`),
+    run under the run directory's lock before anything else is planned; returns the tuned robot and the report,
+    and applies the gait-policy overrides the search verified with to ``cfg.policy``."""
+    from omegaconf import open_dict
+
+    from hierloco.pipeline.tuning import tuned_robot, tuning_stage
+
+    stage = tuning_stage(cfg, robot)
+    if not multirun:
+        directory.check_free()
+    check_owner(directory, method, cfg, robot)
+    directory.verify([stage.spec])
+    directory.acquire(wait=multirun)
+    try:
+        report = Run(cfg, method, robot, Plan(tuning=stage), directory, None).stage(stage)
+    except BaseException:
+        directory.release()
+        raise
+    with open_dict(cfg):
+        for key, value in report["policy_overrides"].items():
+            cfg.policy[key] = value
+    return tuned_robot(robot, report), dict(report)
 
 
 def open_logger(cfg, method: str, robot, run_path: Path):

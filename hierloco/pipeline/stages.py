@@ -51,8 +51,16 @@ class GaitPolicyQualityError(Finding, ValueError):
 
 
 # ---------------------------------------------------------------------------------------------------- experts
+# Options added after runs were recorded, keyed only when they differ from these defaults (docs/pipeline.md).
+EXPERTS_DEFAULTS = {"tune": False, "tune_budget": 300.0}
+POLICY_DEFAULTS = {"adaptive": False, "budget_epochs": None}
+
+
 def experts_stage(cfg, robot_digest: str) -> Stage:
-    params = {"seed": cfg.seed, "steps_per_action": cfg.steps_per_action, **section(cfg, "experts")}
+    from hierloco.registry import without_defaults
+
+    params = {"seed": cfg.seed, "steps_per_action": cfg.steps_per_action,
+              **without_defaults(section(cfg, "experts"), EXPERTS_DEFAULTS)}
     return Stage("experts", params, {"robot": robot_digest}, "experts.npz",
                  "hierloco.components.expert_library:ExpertLibrary", build_experts,
                  check_experts)
@@ -80,7 +88,15 @@ def check_experts(run, library: ExpertLibrary) -> None:
 
 # ---------------------------------------------------------------------------------------------------- gait policy
 def gait_policy_stage(cfg, experts: Stage) -> Stage:
-    params = {"seed": cfg.seed, "device": cfg.device, **section(cfg, "policy")}
+    """The gait policy; with ``policy.adaptive=true`` it is fitted by :func:`hierloco.components.gait_policy.
+    fit_gait_policy` (longer, wider, a lower learning rate until it reproduces ``checks.min_reproduced_fraction`` of
+    the experts, within ``policy.budget_epochs``), and only then does its key hold those options and the bar."""
+    from hierloco.registry import without_defaults
+
+    policy = without_defaults(section(cfg, "policy"), POLICY_DEFAULTS)
+    if policy.get("adaptive"):
+        policy["min_reproduced_fraction"] = cfg.checks.min_reproduced_fraction
+    params = {"seed": cfg.seed, "device": cfg.device, **policy}
     return Stage("gait_policy", params, {"experts": experts.digest}, "gait_policy.pt",
                  "hierloco.components.gait_policy:TrainedGaitPolicy",
                  build_gait_policy)
@@ -92,9 +108,21 @@ def build_gait_policy(run, params, library: ExpertLibrary) -> TrainedGaitPolicy:
     from hierloco.envs.locomotion import periods_per_action
 
     periods = periods_per_action(run.robot, library.steps_per_action)
-    trained = train_gait_policy(library.joint_targets, periods_per_action=periods, progress=run.progress, **params)
+    fit_options = {key: params[key] for key in ("adaptive", "budget_epochs", "min_reproduced_fraction") if key in params}
+    train = {key: value for key, value in params.items() if key not in fit_options}
+    if fit_options.pop("adaptive", False):
+        from hierloco.components.gait_policy import fit_gait_policy
+
+        fit = fit_gait_policy(library, robot=run.robot, periods_per_action=periods, progress=run.progress,
+                              **fit_options, **train)
+        trained = fit.trained
+        if not fit.ok and fit.limited_by_experts:
+            print("the experts' own targets reproduce too few of them for any fit: hierloco-robot-check searches "
+                  "expert parameters that walk")
+    else:
+        trained = train_gait_policy(library.joint_targets, periods_per_action=periods, progress=run.progress, **train)
     run.logger.log_curve("train/gait_policy", {"loss": trained.metadata["loss_history"]}, step_name="epoch")
-    run.logger.log_scalar("train/gait_policy/rmse", trained.metadata["rmse"], step=params["epochs"])
+    run.logger.log_scalar("train/gait_policy/rmse", trained.metadata["rmse"], step=len(trained.metadata["loss_history"]))
     return trained
 
 

@@ -113,3 +113,44 @@ def test_a_yaml_robot_runs_through_the_comparison_study(robot_yaml, tmp_path):
     rows = read_csv(tmp_path / "out" / "comparison.csv")
     assert {(r["method"], r["robot"]) for r in rows} == {("lib", "quadruped20")}
     assert (tmp_path / "outputs" / "lib" / "tiny" / "quadruped20_seed0" / "results.csv").exists()
+
+
+def test_an_adaptive_gait_policy_is_keyed_and_records_its_fits(tmp_path):
+    """``policy.adaptive=true``: the gait policy is fitted until it reproduces the bar or the epoch budget ends; the
+    stage key holds the options and the bar (only then), the checkpoint the fits tried."""
+    import json
+
+    import torch
+
+    from tests.runner import run_in_process
+
+    run_dir = tmp_path / "run"
+    result = run_in_process("lat", "preset=tiny", "progress=false", f"run_dir={run_dir}", "eval.videos=[]",
+                            "eval.generalization=null", "policy.adaptive=true", "policy.budget_epochs=250",
+                            "checks.min_reproduced_fraction=0.9")
+    assert result.returncode in (0, 2), result.stderr[-3000:]  # a policy below the bar stops the run, as before
+    key = json.loads((run_dir / "gait_policy.pt.key.json").read_text())["params"]
+    assert key["adaptive"] is True and key["budget_epochs"] == 250 and key["min_reproduced_fraction"] == 0.9
+    attempts = torch.load(run_dir / "gait_policy.pt", weights_only=True)["metadata"]["adaptive_fit"]["attempts"]
+    assert attempts and sum(a["epochs"] for a in attempts) <= 100 + 250  # the configured fit, then the budget
+
+
+@pytest.mark.slow
+def test_experts_tune_searches_the_robot_first_and_records_what_it_found(robot_yaml, tmp_path):
+    """``experts.tune=true``: the expert parameters are searched (cached, ``expert_tuning.json``) before anything
+    is planned; later stages key on the tuned robot; ``run.json`` holds the YAML lines found."""
+    import json
+
+    from tests.runner import run_in_process
+
+    run_dir = tmp_path / "run"
+    result = run_in_process("lat", "preset=tiny", "progress=false", f"robot={robot_yaml}", f"run_dir={run_dir}",
+                            "eval.videos=[]", "experts.tune=true", "experts.tune_budget=60")
+    assert result.returncode == 0, result.stderr[-3000:]
+    tuning = json.loads((run_dir / "run.json").read_text())["expert_tuning"]
+    assert tuning["yaml"] and tuning["tuned_fingerprint"]
+    experts_key = json.loads((run_dir / "experts.npz.key.json").read_text())
+    assert experts_key["after"]["robot"] == tuning["tuned_fingerprint"] and experts_key["params"]["tune"] is True
+    again = run_in_process("lat", "preset=tiny", "progress=false", f"robot={robot_yaml}", f"run_dir={run_dir}",
+                           "eval.videos=[]", "experts.tune=true", "experts.tune_budget=60")
+    assert again.returncode == 0 and "expert_tuning" in again.stdout and "(cached)" in again.stdout

@@ -134,3 +134,23 @@ def test_a_ray_address_that_does_not_answer_is_one_line_within_seconds(tmp_path)
         "error: cannot reach a Ray cluster at 127.0.0.1:1 (Connection refused): start it, or leave ray.address and "
         "RAY_ADDRESS unset for a local instance"], result.stderr
     assert not (tmp_path / "outputs").exists()
+
+
+@pytest.mark.parametrize("recipe", ["lat", "ik"])
+@pytest.mark.parametrize("change, said", [
+    ({"standing_pose": [0.0, 2.4, -2.7]}, "the feet are only 0.054 m below their hips"),  # a folded 'home' pose
+    ({"torque_limit": 15.0}, "121% of its 15.0 N m limit"),                            # motors too weak for it
+])
+def test_a_robot_that_cannot_walk_is_a_finding_in_seconds(tmp_path, recipe, change, said):
+    """Case 16: a robot whose description cannot stand is refused at the first stage that would simulate it, in
+    seconds, as a finding (``failed.json``: a study reports it and does not run it again); not minutes of leg IK
+    or a traceback after the experts."""
+    from tests.envs.test_robot_check import _yaml_copy
+
+    robot = _yaml_copy(tmp_path, **change)
+    start = time.perf_counter()
+    result = run_in_process(recipe, "preset=tiny", f"robot={robot}", f"run_dir={tmp_path / 'run'}")
+    assert time.perf_counter() - start < 30  # most of it: the recipe's import and the config check
+    assert result.returncode == 2 and len(result.lines) == 1 and said in result.lines[0], result.stderr
+    failure = json.loads((tmp_path / "run" / "failed.json").read_text())
+    assert failure["stage"] == ("experts" if recipe == "lat" else "dynamics_data_normal") and said in failure["error"]

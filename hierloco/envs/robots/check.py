@@ -38,6 +38,7 @@ from hierloco.envs.robots.spec import (
     joint_qpos_indices,
     stance_legs,
 )
+from hierloco.errors import Finding
 
 MIN_FOOT_DROP = 0.25  # a foot below its hip by at least this fraction of the leg's reach, in the standing pose
 FOOT_DROP_SUGGESTED = 0.6  # the suggested pose puts the feet this fraction of the reach below the hips
@@ -185,6 +186,11 @@ def _leg_slices(robot: RobotSpec) -> list[slice]:
         slices.append(slice(start, start + len(leg.joints)))
         start += len(leg.joints)
     return slices
+
+
+class RobotDescriptionError(Finding, ValueError):
+    """A robot whose description keeps it from standing and walking (:func:`description_problems`): a finding about
+    the robot, recorded by the pipeline like the experts' own (``docs/pipeline.md``)."""
 
 
 def description_problems(robot: RobotSpec) -> list[str]:
