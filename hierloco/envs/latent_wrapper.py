@@ -70,8 +70,8 @@ class LatentActionWrapper(EnvBase):
             raise ValueError("give steps_per_action, action_low and action_high with a low level that is a module")
         if isinstance(steps_per_action, bool) or int(steps_per_action) != steps_per_action or steps_per_action < 1:
             raise ValueError(f"steps_per_action must be a whole number of control steps >= 1, got {steps_per_action}")
-        low = torch.as_tensor(action_low, dtype=torch.float32)
-        high = torch.as_tensor(action_high, dtype=torch.float32)
+        low = torch.as_tensor(action_low, dtype=torch.float32, device="cpu")
+        high = torch.as_tensor(action_high, dtype=torch.float32, device="cpu")
         if low.ndim != 1 or low.shape != high.shape or not torch.all(low <= high):
             raise ValueError(f"bad latent box: low {action_low}, high {action_high}")
         super().__init__(batch_size=env.batch_size, device=env.device)
@@ -107,7 +107,7 @@ class LatentActionWrapper(EnvBase):
             inner.set(self.phase_key, torch.full((*batch, 1), n / self.steps_per_action, device=latent.device))
             inner = self.env.step(self.low_level(inner))
             now = inner.get("next").select(*keys, strict=False)
-            done = now.get("done").reshape(batch) if "done" in now.keys() else torch.zeros(batch, dtype=torch.bool)
+            done = now.get("done").reshape(batch) if "done" in now.keys() else torch.zeros(batch, dtype=torch.bool, device=latent.device)
             if out is None:
                 out, finished = now.clone(), done.clone()
                 reward = {key: now.get(key).clone() for key in reward_keys}

@@ -204,11 +204,11 @@ WORLD_MODEL_DEFAULTS = {"risk": "none", "beta": 1.0}  # how the world model scor
 
 def planner_params(cfg) -> dict:
     """The ``planner`` section as an evaluation's key holds it (see :data:`PLANNER_KEYS`)."""
-    from hierloco.components.planners import PLANNERS
+    from hierloco.components.planners import PLANNERS, SCORING_DEFAULTS
     from hierloco.registry import without_defaults
 
     values = section(cfg, "planner")
-    defaults = {**PLANNERS.options(values["name"]), **WORLD_MODEL_DEFAULTS}
+    defaults = {**PLANNERS.options(values["name"]), **WORLD_MODEL_DEFAULTS, **SCORING_DEFAULTS}
     return without_defaults(values, defaults, keep=PLANNER_KEYS)
 
 

@@ -40,7 +40,7 @@ def plan(cfg, robot) -> Plan:
     """SAC low level -> its tracking report -> per main task: a SAC high level over the command, its evaluations."""
     from hierloco.envs.robots import robot_fingerprint
 
-    low = Stage("sac_low_level", {"seed": cfg.seed, **config.section(cfg, "low_level")},
+    low = Stage("sac_low_level", {"seed": cfg.seed, **config.section(cfg, "low_level"), **low_level_device(cfg)},
                        {"robot": robot_fingerprint(robot)}, "sac_low_level.pt", TrainedSACLowLevel, build_low_level)
     report = Stage("sac_low_level_tracking", {"seed": cfg.seed, "steps_per_action": cfg.steps_per_action,
                                                      "actor": cfg.low_level_actor, **config.section(cfg, "tracking")},
@@ -48,6 +48,12 @@ def plan(cfg, robot) -> Plan:
     low_level = {"kind": "sac_command", "sac_low_level": low.digest, "steps_per_action": cfg.steps_per_action,
                  "actor": cfg.low_level_actor}
     return Plan(low_level=low, low_level_tracking=report, tasks=sac.high_level_stages(cfg, low_level))
+
+
+def low_level_device(cfg) -> dict:
+    """``{"device": ...}`` when the low level trains elsewhere than on the CPU, else ``{}``: its key held no device
+    before it could train on a GPU, so CPU runs and records keep their keys."""
+    return {} if str(cfg.device) == "cpu" else {"device": str(cfg.device)}
 
 
 def build_low_level(run, params) -> TrainedSACLowLevel:
