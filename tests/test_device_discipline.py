@@ -232,3 +232,29 @@ def test_planners_under_a_meta_default_device(tiny_lat, planner):
     torch.testing.assert_close(actions, expected)
     if not finite:
         assert np.isfinite(actions.numpy()).all()
+
+
+def test_evaluation_plans_every_robot_of_a_task_in_one_call_per_action(tiny_lat, monkeypatch):
+    """Closed-loop evaluation batches the task's robots: one planner call per task step, over all its episodes at
+    once (on a GPU: one transfer each way per action, not one per robot)."""
+    from hierloco.envs.tasks import make_task
+    from hierloco.pipeline import stages
+
+    calls = []
+    run_task = stages.run_task
+
+    def counting(env, planner, task, **options):
+        forward = planner.forward
+
+        def counted(tensordict, *args, **kwargs):
+            calls.append(tensordict.batch_size[0])
+            return forward(tensordict, *args, **kwargs)
+
+        planner.forward = counted
+        return run_task(env, planner, task, **options)
+
+    monkeypatch.setattr(stages, "run_task", counting)
+    task = make_task("goal_reaching", num_goals=3, num_steps=2)
+    params = {"setting": "normal", "seed": 0, "device": "cpu", "planner": {"name": "random_shooting", **PLANNER}}
+    stages.evaluation_rollout(tiny_lat["robot"], params, task, tiny_lat["low_level"], tiny_lat["mlp"], nthread=1)
+    assert calls == [task.num_episodes] * task.num_steps
