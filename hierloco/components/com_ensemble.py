@@ -62,7 +62,8 @@ class EnsembleLinear(nn.Module):
     def __init__(self, members: int, in_features: int, out_features: int):
         super().__init__()
         bound = 1.0 / math.sqrt(in_features)
-        self.weight = nn.Parameter(torch.empty(members, in_features, out_features, device="cpu").uniform_(-bound, bound))
+        self.weight = nn.Parameter(torch.empty(members, in_features, out_features, device="cpu").uniform_(-bound,
+                                                                                                        bound))
         self.bias = nn.Parameter(torch.empty(members, 1, out_features, device="cpu").uniform_(-bound, bound))
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:

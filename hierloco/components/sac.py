@@ -13,8 +13,9 @@ update; with ``compile_update=True`` the loss forward and backward are compiled 
 (it removes most of the Python overhead of small networks, at a one-off compile cost of about a minute on two
 cores; ``benchmarks/bench_sac.py`` measures both), with CUDA graphs on a GPU (``mode="reduce-overhead"``,
 :func:`hierloco.devices.compile_mode`; a mode name chooses another). The agent, its loss and the replay buffer live
-on ``device``; the env stays on the CPU and each env step crosses once each way (``docs/gpu.md``). Train with one torch thread (:func:`torch_threads`, the default
-of :func:`train_sac`) when cores are shared: small updates run many times faster than with two.
+on ``device``; the env stays on the CPU and each env step crosses once each way (``docs/gpu.md``). Train with one
+torch thread (:func:`torch_threads`, the default of :func:`train_sac`) when cores are shared: small updates run many
+times faster than with two.
 
 Example:
     >>> import torch

@@ -107,7 +107,8 @@ class LatentActionWrapper(EnvBase):
             inner.set(self.phase_key, torch.full((*batch, 1), n / self.steps_per_action, device=latent.device))
             inner = self.env.step(self.low_level(inner))
             now = inner.get("next").select(*keys, strict=False)
-            done = now.get("done").reshape(batch) if "done" in now.keys() else torch.zeros(batch, dtype=torch.bool, device=latent.device)
+            done = (now.get("done").reshape(batch) if "done" in now.keys()
+                    else torch.zeros(batch, dtype=torch.bool, device=latent.device))
             if out is None:
                 out, finished = now.clone(), done.clone()
                 reward = {key: now.get(key).clone() for key in reward_keys}

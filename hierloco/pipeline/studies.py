@@ -1,8 +1,7 @@
 """Studies (compare, ablations, adverse, ...) as jobs on Ray: one recipe run per job, one machine to a cluster.
 
 A :class:`Job` is one recipe run (``recipes/<method>/train.py`` with overrides, into its own run directory). 
-:func:`run_jobs` submits every job as a Ray task with the cores it asks for (``num_cpus``) and its share of a GPU
-(``num_gpus``, ``gpus_per_job``: its networks then run on ``device=cuda``, else on ``device=cpu``), on a local Ray instance
+:func:`run_jobs` submits every job as a Ray task with the cores it asks for (``num_cpus``), on a local Ray instance
 started for the study, or on the cluster at ``address`` / ``RAY_ADDRESS``. Each job runs the recipe in a subprocess
 with as many simulation and torch threads as it has cores, so jobs never oversubscribe the machine. Finished jobs
 are reused from their run directories (a killed study, re-run, resubmits only what did not finish); a failed job
@@ -15,6 +14,9 @@ record while its stage keys are today's: a study runs in parts, on several machi
 a finding about its setting (:class:`hierloco.errors.Finding`) is not evaluable, a result rather than a failure: it
 is kept (``failed.json`` in its run directory, its record) and reported from there, not run again, while the stage it
 failed in has today's key.
+
+A job may also ask for a share of a GPU (``gpus_per_job``, Ray's ``num_gpus``): its networks, training and planning
+then run on ``device=cuda`` and its simulation on its cores; without one a job runs on ``device=cpu``.
 
 Example:
     >>> jobs = [Job("lat", "outputs/lat/tiny/a1_seed0", ["preset=tiny"]), Job("lib", "outputs/lib/tiny/a1_seed0",
@@ -54,10 +56,10 @@ class Job:
     run_dir: str
     overrides: list[str]
     cores: int = 1
-    device: str | None = None  # where its networks run (device=...; None: the recipe's default); not in its signature
     labels: dict = field(default_factory=dict)  # added to every result row (e.g. the ablation value)
     reuse_from: str | None = None  # another run directory whose finished stages this job starts from (their keys
     reuse_stages: tuple = ()       # equal to this job's own): those named here, or every one when it names none
+    device: str | None = None  # where its networks run (device=...; None: the recipe's default); not in its signature
 
     def command(self) -> list[str]:
         return [sys.executable, str(METHODS[self.method].train_script), f"run_dir={self.run_dir}",
@@ -392,7 +394,8 @@ def machine_slots(cores_per_job: int, gpus_per_job: float = 0.0, *, cores: int |
 
         gpus = torch.cuda.device_count() if torch.cuda.is_available() else 0
     slots = max(1, cores // max(1, int(cores_per_job)))
-    words = f"{cores} cores, {gpus} GPU{'s' if gpus != 1 else ''}; {cores_per_job} core{'s' if cores_per_job != 1 else ''}"
+    words = (f"{cores} cores, {gpus} GPU{'s' if gpus != 1 else ''}; "
+             f"{cores_per_job} core{'s' if cores_per_job != 1 else ''}")
     if gpus_per_job > 0:
         slots = min(slots, max(0, int(gpus / gpus_per_job + 1e-9)))
         words += f" and {gpus_per_job:g} GPU"
