@@ -72,8 +72,15 @@ def check_experts(run, library: ExpertLibrary) -> None:
 
 
 # ---------------------------------------------------------------------------------------------------- gait policy
+def training_device(cfg) -> str:
+    """The device the training stages were (or are) made on: ``device``, or when ``recipes/evaluate.py`` evaluates a
+    run on another device, the one it was trained on (``trained_device``), so the trained stages keep their keys
+    while the evaluations record the device they run on (``docs/gpu.md``)."""
+    return str(cfg.get("trained_device") or cfg.device)
+
+
 def gait_policy_stage(cfg, experts: Stage) -> Stage:
-    params = {"seed": cfg.seed, "device": cfg.device, **section(cfg, "policy")}
+    params = {"seed": cfg.seed, "device": training_device(cfg), **section(cfg, "policy")}
     return Stage("gait_policy", params, {"experts": experts.digest}, "gait_policy.pt", TrainedGaitPolicy,
                  build_gait_policy)
 
@@ -169,7 +176,7 @@ def model_params(cfg) -> dict:
 
 
 def dynamics_model_stage(cfg, data: Stage, setting: str) -> Stage:
-    params = {"seed": cfg.seed, "device": cfg.device, "duration": cfg.steps_per_action * CONTROL_TIMESTEP,
+    params = {"seed": cfg.seed, "device": training_device(cfg), "duration": cfg.steps_per_action * CONTROL_TIMESTEP,
               **model_params(cfg)}
     return Stage(f"dynamics_model_{setting}", params, {"data": data.digest}, f"dynamics_model_{setting}.pt",
                  TrainedCoMModel, build_dynamics_model)

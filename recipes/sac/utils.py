@@ -75,7 +75,8 @@ def sac_stage(cfg, name: str, spec: dict, low_level: dict) -> Stage:
     """The SAC agent of task ``name``, trained on its training split whichever split is evaluated (``split: train``
     evaluates the training targets only, as tuning does: the same agent, so its key leaves the split out)."""
     trained_on = {k: v for k, v in spec.items() if k != "split"}
-    params = {"seed": cfg.seed, "device": cfg.device, "task_name": name, "task": trained_on, **sac_params(cfg)}
+    params = {"seed": cfg.seed, "device": stages.training_device(cfg), "task_name": name, "task": trained_on,
+              **sac_params(cfg)}
     return Stage(f"sac_{name}", params, {"low_level": low_level}, f"sac_{name}.pt", SACAgent, train_high_level)
 
 

@@ -10,7 +10,7 @@ from hierloco.components.sac_low_level import (
     evaluate_velocity_tracking,
     train_sac_low_level,
 )
-from hierloco.pipeline import config
+from hierloco.pipeline import config, stages
 from hierloco.pipeline.plan import JsonReport, Plan, Stage
 from recipes.sac_sac.report import write_low_level_report
 from recipes.sac import utils as sac
@@ -53,7 +53,8 @@ def plan(cfg, robot) -> Plan:
 def low_level_device(cfg) -> dict:
     """``{"device": ...}`` when the low level trains elsewhere than on the CPU, else ``{}``: its key held no device
     before it could train on a GPU, so CPU runs and records keep their keys."""
-    return {} if str(cfg.device) == "cpu" else {"device": str(cfg.device)}
+    device = stages.training_device(cfg)
+    return {} if device == "cpu" else {"device": device}
 
 
 def build_low_level(run, params) -> TrainedSACLowLevel:

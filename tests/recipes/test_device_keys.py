@@ -124,3 +124,22 @@ def test_every_study_has_a_gpu_share_option():
             cfg = compose(config_name="config")
         GlobalHydra.instance().clear()
         assert OmegaConf.select(cfg, "ray.gpus_per_job") == 0 and OmegaConf.select(cfg, "ray.cores_per_job") == 1
+
+
+@pytest.mark.parametrize("recipe", ["lat", "sac", "sac_sac"])
+def test_a_run_evaluated_on_another_device_keeps_its_trained_stages(recipe):
+    """``recipes/evaluate.py run_dir=... device=cuda`` on a run trained on the CPU: the trained stages keep their keys
+    (``trained_device``, set by the evaluation), the evaluations record the device they run on. Planned without the
+    device check, which needs the GPU."""
+    from hierloco.envs.robots import get_robot
+
+    utils = importlib.import_module(f"recipes.{recipe}.utils")
+    cpu = plan(recipe, "device=cpu")
+    cfg = compose_recipe(recipe, ["preset=tiny", "device=cuda", "+trained_device=cpu"])
+    elsewhere = {stage.name: stage for stage in utils.plan(cfg, get_robot("a1")).stages()}
+    changed = {name for name in cpu if cpu[name].digest != elsewhere[name].digest}
+    trained = {name for name, stage in cpu.items() if stage.trains}
+    assert not changed & trained
+    if recipe == "lat":
+        assert changed == {name for name in cpu if name.startswith("evaluation_")}
+        assert elsewhere["evaluation_normal_goal_reaching"].params["device"] == "cuda"
