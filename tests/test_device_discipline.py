@@ -258,3 +258,20 @@ def test_evaluation_plans_every_robot_of_a_task_in_one_call_per_action(tiny_lat,
     params = {"setting": "normal", "seed": 0, "device": "cpu", "planner": {"name": "random_shooting", **PLANNER}}
     stages.evaluation_rollout(tiny_lat["robot"], params, task, tiny_lat["low_level"], tiny_lat["mlp"], nthread=1)
     assert calls == [task.num_episodes] * task.num_steps
+
+
+@pytest.mark.parametrize("name, options", list(TASKS.items()))
+def test_a_task_copies_its_targets_to_a_device_once(name, options):
+    """A task keeps its constants on the CPU and one copy per device (``Task.on``): the targets a planner on another
+    device indexes are already there (``meta`` stands for that device here), and its CPU side is unchanged."""
+    from hierloco.envs.tasks import make_task
+
+    task = make_task(name, **options)
+    before = {key: value for key, value in vars(task).items() if isinstance(value, torch.Tensor)}
+    task.to_device("meta")
+    constants = [key for key in before]
+    assert constants and all(task.on(key, "meta") is task.on(key, "meta") for key in constants)
+    assert all(task.on(key, "meta").device.type == "meta" for key in constants)
+    assert all(task.on(key, "cpu") is before[key] and getattr(task, key) is before[key] for key in constants)
+    step = torch.zeros(2, dtype=torch.long, device="meta")
+    assert task.target(step, step).device.type == "meta"

@@ -129,6 +129,27 @@ class Task:
         """``... x 2`` target (a velocity in m/s or a position in m, world frame) at task step ``step``."""
         raise NotImplementedError
 
+    def on(self, name: str, device) -> torch.Tensor:
+        """The task's constant tensor ``name`` (kept on the CPU) on ``device``, copied there once: a planner on a
+        GPU indexes its targets there at every call, and a compiled (CUDA-graphed) scoring sees no CPU tensor.
+        :meth:`to_device` makes every copy ahead of such a call."""
+        tensor = getattr(self, name)
+        if tensor.device == torch.device(device):
+            return tensor
+        copies = self.__dict__.setdefault("_device_copies", {})
+        key = (name, str(device))
+        if key not in copies:
+            copies[key] = tensor.to(device)
+        return copies[key]
+
+    def to_device(self, device) -> "Task":
+        """Copies every constant tensor of the task to ``device`` once (see :meth:`on`); the task itself stays as it
+        is, on the CPU, for the simulated robots' side."""
+        for name, value in list(vars(self).items()):
+            if isinstance(value, torch.Tensor):
+                self.on(name, device)
+        return self
+
     def tracking_error(self, state, next_state, target) -> torch.Tensor:
         """``...`` the error of the transition ``state -> next_state`` (``... x 5`` world) against ``target``
         (``... x 2``, from :meth:`target`): m/s for a velocity target, m for a position."""
@@ -311,7 +332,7 @@ class VelocityTracking(Task):
 
     def target(self, episode, step):
         index = (step // self.steps_per_target) % len(self.velocities)
-        return self.velocities.to(index.device)[index]
+        return self.on("velocities", index.device)[index]
 
     def tracking_error(self, state, next_state, target):
         velocity = (next_state[..., :2] - state[..., :2]) / self.step_duration
@@ -346,7 +367,7 @@ class GoalReaching(Task):
         self.num_steps = _whole("num_steps", num_steps, 1)
 
     def target(self, episode, step):
-        return self.goals.to(episode.device)[episode]
+        return self.on("goals", episode.device)[episode]
 
     def markers(self, episode: int | None = None) -> np.ndarray:
         """The goals ``K x 2`` (m), or goal ``episode`` alone (``1 x 2``)."""
@@ -430,7 +451,7 @@ class TrajectoryTracking(Task):
         return self.path[index - 1] * (1 - w) + self.path[index] * w
 
     def target(self, episode, step):
-        return self.references.to(step.device)[step.clamp(0, self.num_steps - 1)]
+        return self.on("references", step.device)[step.clamp(0, self.num_steps - 1)]
 
     def tracking_error(self, state, next_state, target):
         return torch.linalg.vector_norm(target - next_state[..., :2], dim=-1)

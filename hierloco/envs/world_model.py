@@ -206,6 +206,8 @@ class CoMWorldModelEnv(ModelBasedEnvBase):
         super().__init__(_StepModule(step), device=device)
         self.model = model
         self.task = task
+        if task is not None and hasattr(task, "to_device"):
+            task.to_device(self.device)
         self.cost = cost
         self.risk, self.beta = risk, float(beta)
         self.num_particles = step.particles
@@ -238,6 +240,8 @@ class CoMWorldModelEnv(ModelBasedEnvBase):
         given (:meth:`set_cost`)."""
         self.task = task
         self.world_model.module.task = task
+        if task is not None and hasattr(task, "to_device"):
+            task.to_device(self.device)  # its targets, once, where the costs are computed
 
     def set_cost(self, cost: Cost | None) -> None:
         """Scores transitions with ``cost`` from now on (``None``: the task's cost again)."""
