@@ -524,7 +524,7 @@ def prediction_errors(model: CoMDynamicsModel, com_states, actions) -> torch.Ten
                          f"{tuple(actions.shape)}")
     velocity_local, actual = local_transition(states[:, :-1], states[:, 1:])
     with torch.no_grad():
-        predicted = model(velocity_local, actions).to(actual.dtype)
+        predicted = model(velocity_local, actions).to(actual.device, actual.dtype)  # from the model's device
     error = predicted - actual
     error[..., 2] = wrap_angle(error[..., 2])
     return error

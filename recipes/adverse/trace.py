@@ -57,6 +57,7 @@ def trace(run_dir: str, setting: str, task_name: str, *, nthread: int | None = N
     trained = run.com_model("normal" if is_unadapted(setting) else setting)
     low_level = run.low_level(task.num_episodes)
     rollout = evaluation_rollout(run.robot, params, task, low_level, trained, nthread=nthread)
+    trained.model.cpu()  # planned on the evaluation's device; the analysis below runs on the CPU
     result = rollout.result
     states = torch.as_tensor(result.com_states, device="cpu")  # E x (T + 1) x 5
     features = torch.as_tensor(low_level.action_features(rollout.actions), dtype=torch.float32, device="cpu")
