@@ -316,7 +316,8 @@ def train_sac(env: EnvBase, agent: SACAgent, *, total_frames: int, init_random_f
     key = agent.observation_key
     transition_keys = (key, "action", ("next", key), ("next", "reward"), ("next", "done"), ("next", "terminated"))
     device = agent.device
-    moves = device != env.device  # the agent acts and learns elsewhere than the env steps
+    env_device = env.device if env.device is not None else torch.device("cpu")
+    moves = device != env_device  # the agent acts and learns elsewhere than the env steps
     storage = LazyTensorStorage(int(buffer_size), device=device) if moves else LazyTensorStorage(int(buffer_size))
     buffer = ReplayBuffer(storage=storage, batch_size=int(batch_size))
     frames, curve, elapsed, owed = 0, [], 0.0, 0.0
@@ -363,7 +364,7 @@ def train_sac(env: EnvBase, agent: SACAgent, *, total_frames: int, init_random_f
                     with set_interaction_type(InteractionType.RANDOM):
                         if moves:  # the observation over, the action back: one transfer each
                             acted = agent.actor(td.select(key).to(device, non_blocking=True))
-                            td.set("action", acted.get("action").to(env.device))
+                            td.set("action", acted.get("action").to(env_device))
                         else:
                             agent.actor(td)
             transition, td = env.step_and_maybe_reset(td)
