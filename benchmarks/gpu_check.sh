@@ -86,7 +86,7 @@ except ImportError:
     print("  hierloco.export: skipped (onnx and onnxruntime are not installed here)")
 else:
     hierloco.export(sys.argv[1], sys.argv[2])
-    print("  hierloco.export of the GPU-trained run: ok")
+    print(f"  hierloco.export of the run trained with device={device}: ok")
 PY
   echo "  step 1 took $((SECONDS - start)) s"
 fi
@@ -97,5 +97,5 @@ if [ "${BENCH:-1}" != 0 ]; then
   timeout 900 $PYTHON benchmarks/gpu.py --cpu-reference --work "$OUT/bench" "${check[@]}" 2>&1 | tee "$OUT/bench.log"
   [ "${PIPESTATUS[0]}" = 0 ] || failed=1
 fi
-[ "$failed" = 0 ] && echo "gpu check: done (results/bench/gpu.md, $OUT/)" || echo "gpu check: FAILED, see above"
+[ "$failed" = 0 ] && echo "gpu check: done ($OUT/; the benchmark's report: results/bench/gpu.md on CUDA)" || echo "gpu check: FAILED, see above"
 exit $failed
