@@ -13,11 +13,12 @@ render_backend.choose()
 __version__ = "0.1.0"
 
 
-def load_run(run_dir):
-    """The trained parts of a recipe's run directory: see :func:`hierloco.trained.load_run`."""
+def load_run(run_dir, device: str = "cpu"):
+    """The trained parts of a recipe's run directory, their networks on ``device``: see
+    :func:`hierloco.trained.load_run`."""
     from hierloco.trained import load_run as _load_run
 
-    return _load_run(run_dir)
+    return _load_run(run_dir, device=device)
 
 
 def export(run_dir, out_dir, **options):

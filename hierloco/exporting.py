@@ -247,7 +247,7 @@ def _export_torchscript(module: nn.Module, example: tuple, path: Path) -> None:
 
 
 def _max_error(reference: torch.Tensor, value) -> float:
-    value = torch.as_tensor(np.asarray(value)) if not isinstance(value, torch.Tensor) else value
+    value = torch.as_tensor(np.asarray(value), device="cpu") if not isinstance(value, torch.Tensor) else value
     if tuple(value.shape) != tuple(reference.shape):
         return math.inf
     return float((value.double() - reference.double()).abs().max())
@@ -274,8 +274,9 @@ def _verify(module: nn.Module, onnx_path: Path, script_path: Path, names: list[s
 
 
 def _uniform(generator, shape, low, high) -> torch.Tensor:
-    low, high = torch.as_tensor(low, dtype=torch.float32), torch.as_tensor(high, dtype=torch.float32)
-    return low + (high - low) * torch.rand(shape, generator=generator)
+    low = torch.as_tensor(low, dtype=torch.float32, device="cpu")
+    high = torch.as_tensor(high, dtype=torch.float32, device="cpu")
+    return low + (high - low) * torch.rand(shape, generator=generator, device="cpu")
 
 
 def _random_states(generator, batch: int) -> torch.Tensor:
@@ -377,7 +378,7 @@ def export_run(run_dir: str | os.PathLike, out_dir: str | os.PathLike, *, settin
             return _uniform(generator, (batch, z_dim), low, high)
 
         def phase(batch):
-            return torch.randint(1, steps + 1, (batch, 1), generator=generator).float() / steps
+            return torch.randint(1, steps + 1, (batch, 1), generator=generator, device="cpu").float() / steps
 
         write("gait_policy_pattern", GaitPolicyPattern(policy),
               "pi(., z): all N joint targets of one latent action (step n at phase n / N), 100 Hz",
@@ -406,7 +407,7 @@ def export_run(run_dir: str | os.PathLike, out_dir: str | os.PathLike, *, settin
 
         def actions(*shape):
             if action_entry.get("features") == "one_hot":
-                index = torch.randint(0, a_dim, shape, generator=generator)
+                index = torch.randint(0, a_dim, shape, generator=generator, device="cpu")
                 return torch.nn.functional.one_hot(index, a_dim).float()
             return _uniform(generator, (*shape, a_dim), box_low, box_high)
 

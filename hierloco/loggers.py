@@ -388,7 +388,7 @@ class RunLogger:
         array = np.asarray(frames)
         if array.ndim != 4 or array.shape[-1] != 3 or array.dtype != np.uint8:
             raise ValueError(f"frames must be T x H x W x 3 uint8, got {array.dtype} {array.shape}")
-        video = torch.as_tensor(np.ascontiguousarray(array.transpose(0, 3, 1, 2)))[None]
+        video = torch.as_tensor(np.ascontiguousarray(array.transpose(0, 3, 1, 2)), device="cpu")[None]
         if "wandb" in self.loggers:
             self.loggers["wandb"].log_video(name, video, step=step, fps=fps)
 

@@ -107,7 +107,8 @@ def plot_velocity_tracking(task, com_paths: np.ndarray, path: str | os.PathLike,
     velocity = (ends - starts) / task.step_duration
     import torch
 
-    targets = task.target(torch.zeros(len(ends), dtype=torch.long), torch.arange(len(ends))).numpy()
+    targets = task.target(torch.zeros(len(ends), dtype=torch.long, device="cpu"),
+                          torch.arange(len(ends), device="cpu")).numpy()
     fig, axes = plt.subplots(2, 1, figsize=(8, 4.5), sharex=True)
     for k, (ax, name) in enumerate(zip(axes, ("vx", "vy"))):
         t = np.arange(1, len(ends) + 1) * task.step_duration

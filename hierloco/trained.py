@@ -8,6 +8,9 @@ Example:
     >>> run = load_run("outputs/lat/paper/a1_seed0")  # doctest: +SKIP
     >>> low_level = run.low_level()                    # pi(., z), for any number of robots
     >>> planner = run.planner(GoalReaching())          # random shooting over z with the learned model
+
+A run trained on any device loads on any other (checkpoints are read onto the CPU, then moved):
+``load_run(path, device="cuda")`` gives parts whose networks and planning run on the GPU (``docs/gpu.md``).
 """
 
 from __future__ import annotations
@@ -40,11 +43,18 @@ def make_world_model(model, low_level, *, task=None, device: str = "cpu"):
 @dataclass
 class TrainedRun:
     """The trained parts of a run directory. Build them with :meth:`low_level`, :meth:`world_model`,
-    :meth:`planner`; ``manifest`` is what the recipe recorded (method, robot, settings, planner, ...)."""
+    :meth:`planner`; ``manifest`` is what the recipe recorded (method, robot, settings, planner, ...); ``device``
+    is where their networks run unless a call names another."""
 
     path: Path
     manifest: dict
     _cache: dict = field(default_factory=dict, repr=False)
+    device: str = "cpu"
+
+    def _device(self, device) -> str:
+        from hierloco.devices import resolve_device
+
+        return resolve_device(self.device if device is None else device)
 
     @property
     def method(self) -> str:
@@ -68,7 +78,7 @@ class TrainedRun:
             raise ArtifactError(f"{self.path} has no {name}: the {self.method} run did not finish that stage")
         return path
 
-    def low_level(self, num_robots: int = 1, device: str = "cpu"):
+    def low_level(self, num_robots: int = 1, device: str | None = None):
         """The trained low level (LAT and SAC: ``pi(., z)``; LIB: expert replay; IK: the expert controller for
         ``num_robots`` robots; SAC-SAC: the SAC velocity policy), rebuilt by its class in the low-level registry
         (:data:`hierloco.envs.low_level.LOW_LEVELS`) from the options the run recorded."""
@@ -79,18 +89,22 @@ class TrainedRun:
             cls = LOW_LEVELS[spec["kind"]]
         except ValueError as error:
             raise ArtifactError(f"{self.path / MANIFEST}: {error}") from None
-        return cls.from_run(self, num_robots=num_robots, device=device, **spec.get("options", {}))
+        return cls.from_run(self, num_robots=num_robots, device=self._device(device), **spec.get("options", {}))
 
-    def com_model(self, setting: str = "normal"):
-        """The trained :class:`~hierloco.components.com_model.TrainedCoMModel` of ``setting``."""
+    def com_model(self, setting: str = "normal", device: str | None = None):
+        """The trained :class:`~hierloco.components.com_model.TrainedCoMModel` of ``setting``, its model on
+        ``device`` (default the run's)."""
         from hierloco.components.com_model import TrainedCoMModel
 
         if setting not in self.settings:
             raise ValueError(f"{self.path} was trained for settings {self.settings}, not {setting!r}")
-        return TrainedCoMModel.load(self.artifact(f"dynamics_model_{setting}.pt"))
+        trained = TrainedCoMModel.load(self.artifact(f"dynamics_model_{setting}.pt"))
+        trained.model.to(self._device(device))
+        return trained
 
-    def world_model(self, setting: str = "normal", task=None, device: str = "cpu"):
+    def world_model(self, setting: str = "normal", task=None, device: str | None = None):
         """The learned CoM world model env of ``setting``, scoring with ``task`` (a :class:`hierloco.envs.Task`)."""
+        device = self._device(device)
         return make_world_model(self.com_model(setting).model, self.low_level(device=device), task=task, device=device)
 
     def dynamics_data(self, setting: str = "normal"):
@@ -104,7 +118,7 @@ class TrainedRun:
             raise ValueError(f"{self.path} was trained for settings {self.settings}, not {setting!r}")
         return TransitionData.load(self.artifact(f"dynamics_data_{setting}.npz"))
 
-    def planner(self, task=None, setting: str = "normal", device: str = "cpu", *, model=None, cost=None,
+    def planner(self, task=None, setting: str = "normal", device: str | None = None, *, model=None, cost=None,
                 risk: str | None = None, beta: float | None = None, **overrides):
         """The run's MPC planner (its recorded settings, changed by ``overrides``) over :meth:`world_model`.
 
@@ -119,11 +133,13 @@ class TrainedRun:
         """
         from hierloco.components.planners import make_planner
 
+        device = self._device(device)
         options = {**self.manifest["planner"], **overrides}
         risk = options.pop("risk", "none") if risk is None else risk
         beta = options.pop("beta", 1.0) if beta is None else beta
         model = self.com_model(setting) if model is None else model
-        world_model = make_world_model(getattr(model, "model", model), self.low_level(), task=task, device=device)
+        world_model = make_world_model(getattr(model, "model", model), self.low_level(device=device), task=task,
+                                       device=device)
         world_model.set_cost(cost)
         world_model.set_risk(risk, beta)
         return make_planner(world_model, seed=self.manifest["seed"], **options)
@@ -144,9 +160,13 @@ def fetch_wandb_run(reference: str) -> Path:
         raise ArtifactError(f"cannot fetch the wandb artifact {name}: {' '.join(str(error).split())[:200]}") from None
 
 
-def load_run(run_dir: str | os.PathLike) -> TrainedRun:
+def load_run(run_dir: str | os.PathLike, device: str = "cpu") -> TrainedRun:
     """Opens the run directory of a finished (or partly finished) model-based recipe run (LAT, LIB, IK), or a run
-    logged to wandb (``"wandb:<entity>/<project>/<run>-run:<version>"``: its checkpoints artifact)."""
+    logged to wandb (``"wandb:<entity>/<project>/<run>-run:<version>"``: its checkpoints artifact). Its parts run on
+    ``device`` (``cpu``, ``cuda``, ``auto``: :func:`hierloco.devices.resolve_device`), whatever it was trained on."""
+    from hierloco.devices import resolve_device
+
+    device = resolve_device(device)  # a device that cannot be used here: ValueError, before any file is read
     if isinstance(run_dir, str) and run_dir.startswith("wandb:"):
         run_dir = fetch_wandb_run(run_dir)
     path = Path(run_dir)
@@ -159,4 +179,4 @@ def load_run(run_dir: str | os.PathLike) -> TrainedRun:
         raise ArtifactError(f"corrupted run manifest {manifest_path}: {error}") from error
     check_schema(manifest, {"method": str, "robot": str, "seed": int, "settings": list, "planner": dict,
                             "low_level": {"kind": str}}, f"corrupted run manifest {manifest_path}")
-    return TrainedRun(path, manifest)
+    return TrainedRun(path, manifest, device=device)

@@ -62,8 +62,9 @@ class EnsembleLinear(nn.Module):
     def __init__(self, members: int, in_features: int, out_features: int):
         super().__init__()
         bound = 1.0 / math.sqrt(in_features)
-        self.weight = nn.Parameter(torch.empty(members, in_features, out_features).uniform_(-bound, bound))
-        self.bias = nn.Parameter(torch.empty(members, 1, out_features).uniform_(-bound, bound))
+        self.weight = nn.Parameter(torch.empty(members, in_features, out_features, device="cpu").uniform_(-bound,
+                                                                                                        bound))
+        self.bias = nn.Parameter(torch.empty(members, 1, out_features, device="cpu").uniform_(-bound, bound))
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return torch.baddbmm(self.bias, x, self.weight)
@@ -108,13 +109,14 @@ class CoMEnsembleModel(nn.Module):
                                      EnsembleLinear(self.num_members, self.hidden, outputs)])
         if head == "gaussian":
             low, high = LOG_VARIANCE_BOUNDS
-            self.min_log_variance = nn.Parameter(torch.full((5,), low))
-            self.max_log_variance = nn.Parameter(torch.full((5,), high))
+            self.min_log_variance = nn.Parameter(torch.full((5,), low, device="cpu"))
+            self.max_log_variance = nn.Parameter(torch.full((5,), high, device="cpu"))
         for name, value, size, default in [("input_mean", input_mean, num_inputs, 0.0),
                                            ("input_std", input_std, num_inputs, 1.0),
                                            ("output_mean", output_mean, 5, 0.0),
                                            ("output_std", output_std, 5, 1.0)]:
-            buffer = torch.full((size,), default) if value is None else torch.as_tensor(value).float().clone()
+            buffer = (torch.full((size,), default, device="cpu") if value is None
+                      else torch.as_tensor(value, device="cpu").float().clone())
             if buffer.shape != (size,):
                 raise ValueError(f"{name} must have shape ({size},), got {tuple(buffer.shape)}")
             self.register_buffer(name, buffer)
@@ -222,12 +224,12 @@ class CoMEnsembleModel(nn.Module):
     def training_rows(self, num_train: int, generator: torch.Generator) -> torch.Tensor:
         """``M x num_train`` indices of the training transitions each member learns from (drawn once)."""
         if self.member_data == "bootstrap":
-            return torch.randint(num_train, (self.num_members, num_train), generator=generator)
-        return torch.arange(num_train).expand(self.num_members, num_train)
+            return torch.randint(num_train, (self.num_members, num_train), generator=generator, device="cpu")
+        return torch.arange(num_train, device="cpu").expand(self.num_members, num_train)
 
     def epoch_order(self, rows: torch.Tensor, num_train: int, generator: torch.Generator) -> torch.Tensor:
         """``M x num_train``: each member's rows in a new random order for one epoch."""
-        permutation = torch.rand(rows.shape, generator=generator).argsort(-1)
+        permutation = torch.rand(rows.shape, generator=generator, device="cpu").argsort(-1)
         return rows.gather(-1, permutation)
 
     def training_loss(self, x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:

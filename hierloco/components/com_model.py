@@ -61,7 +61,7 @@ MODELS = Registry("dynamics_model", context=("action_dim", "input_mean", "input_
 
 
 def _as_float_tensor(x) -> torch.Tensor:
-    tensor = torch.as_tensor(x)
+    tensor = x if isinstance(x, torch.Tensor) else torch.as_tensor(x, device="cpu")
     return tensor if tensor.is_floating_point() else tensor.to(torch.get_default_dtype())
 
 
@@ -165,7 +165,8 @@ class CoMDynamicsModel(nn.Module):
                                            ("input_std", input_std, num_inputs, 1.0),
                                            ("output_mean", output_mean, 5, 0.0),
                                            ("output_std", output_std, 5, 1.0)]:
-            buffer = torch.full((size,), default) if value is None else torch.as_tensor(value).float().clone()
+            buffer = (torch.full((size,), default, device="cpu") if value is None
+                      else torch.as_tensor(value, device="cpu").float().clone())
             if buffer.shape != (size,):
                 raise ValueError(f"{name} must have shape ({size},), got {tuple(buffer.shape)}")
             self.register_buffer(name, buffer)
@@ -206,7 +207,7 @@ class CoMDynamicsModel(nn.Module):
 
     def epoch_order(self, rows, num_train: int, generator: torch.Generator) -> torch.Tensor:
         """``num_train``: the training rows in a new random order for one epoch."""
-        return torch.randperm(num_train, generator=generator)
+        return torch.randperm(num_train, generator=generator, device="cpu")
 
     def training_loss(self, x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
         """The MSE of the standardised delta on ``b x (2 + A)`` standardised inputs and ``b x 5`` targets."""
@@ -315,7 +316,7 @@ def holdout_split(num: int, holdout: float, seed: int) -> tuple[torch.Tensor, to
     ``round(holdout * num)`` transitions are held out, at least 1 and at most ``num - 1``.
     """
     num_heldout = min(max(1, round(holdout * num)), num - 1)
-    order = torch.randperm(num, generator=torch.Generator().manual_seed(seed))
+    order = torch.randperm(num, generator=torch.Generator().manual_seed(seed), device="cpu")
     return order[num_heldout:], order[:num_heldout]
 
 
@@ -323,8 +324,8 @@ def _check_training_inputs(com_state, action, next_com_state, holdout) -> tuple[
     tensors = {}
     for name, value in [("com_state", com_state), ("action", action), ("next_com_state", next_com_state)]:
         try:
-            tensors[name] = torch.as_tensor(value if isinstance(value, torch.Tensor) else np.asarray(value,
-                                                                                                     float))
+            tensors[name] = (value.cpu() if isinstance(value, torch.Tensor)
+                             else torch.as_tensor(np.asarray(value, float), device="cpu"))
         except (TypeError, ValueError, RuntimeError) as error:
             raise ValueError(f"{name} is not a numeric array: {error}") from error
     state, act, next_state = (tensors[k].double() for k in ("com_state", "action", "next_com_state"))
@@ -528,7 +529,7 @@ def prediction_errors(model: CoMDynamicsModel, com_states, actions) -> torch.Ten
                          f"{tuple(actions.shape)}")
     velocity_local, actual = local_transition(states[:, :-1], states[:, 1:])
     with torch.no_grad():
-        predicted = model(velocity_local, actions).to(actual.dtype)
+        predicted = model(velocity_local, actions).to(actual.device, actual.dtype)  # from the model's device
     error = predicted - actual
     error[..., 2] = wrap_angle(error[..., 2])
     return error

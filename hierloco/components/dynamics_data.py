@@ -56,10 +56,10 @@ class UniformActionPolicy(TensorDictModuleBase):
         spec = self.action_spec
         shape = tensordict.batch_size + spec.shape[len(tensordict.batch_size):]
         if isinstance(spec, Categorical):
-            action = torch.randint(spec.n, shape, generator=self.generator, dtype=spec.dtype)
+            action = torch.randint(spec.n, shape, generator=self.generator, dtype=spec.dtype, device="cpu")
         else:
-            low, high = spec.space.low, spec.space.high
-            action = low + (high - low) * torch.rand(shape, generator=self.generator)
+            low, high = spec.space.low.cpu(), spec.space.high.cpu()
+            action = low + (high - low) * torch.rand(shape, generator=self.generator, device="cpu")
         return tensordict.set("action", action.to(spec.device))
 
 

@@ -101,7 +101,8 @@ def run_task(env: LatentActionEnv, policy, task: Task, *, episodes=None, transfo
         progress: a per-step progress bar.
     """
     count = env.batch_size[0]
-    episodes = torch.arange(count) % task.num_episodes if episodes is None else torch.as_tensor(episodes)
+    episodes = (torch.arange(count, device="cpu") % task.num_episodes if episodes is None
+                else torch.as_tensor(episodes, device="cpu"))
     if episodes.numel() != count:
         raise ValueError(f"{count} robots for {episodes.numel()} episodes")
     if isinstance(policy, TaskPolicy):

@@ -61,11 +61,14 @@ class LatentGaitPolicy(nn.Module):
         self.hidden = int(hidden)
         self.net = MLP(in_features=2 * self.num_harmonics + self.latent_dim, out_features=self.num_joints,
                        num_cells=[self.hidden, self.hidden], activation_class=nn.ReLU)
-        self.register_buffer("joint_mean", torch.zeros(num_joints) if joint_mean is None else joint_mean.float())
-        self.register_buffer("joint_std", torch.ones(num_joints) if joint_std is None else joint_std.float())
-        frequencies = 2 * math.pi * self.periods_per_action * torch.arange(1, self.num_harmonics + 1)
+        self.register_buffer("joint_mean", torch.zeros(num_joints, device="cpu") if joint_mean is None
+                             else joint_mean.float())
+        self.register_buffer("joint_std", torch.ones(num_joints, device="cpu") if joint_std is None
+                             else joint_std.float())
+        frequencies = 2 * math.pi * self.periods_per_action * torch.arange(1, self.num_harmonics + 1, device="cpu")
         self.register_buffer("frequencies", frequencies.float())
-        self.register_buffer("phases", torch.arange(1, self.steps_per_action + 1).float() / self.steps_per_action)
+        self.register_buffer("phases", torch.arange(1, self.steps_per_action + 1, device="cpu").float()
+                             / self.steps_per_action)
 
     def phase_features(self, phase: torch.Tensor) -> torch.Tensor:
         """``... x 1`` phase in (0, 1] -> ``... x 2K`` features."""
@@ -173,7 +176,7 @@ def train_gait_policy(
     Returns the trained policy, the ``G x Z`` latents, the latent box they span, and a report in ``metadata``:
     ``rmse_per_joint`` (rad), ``rmse``, the training time and ``loss_history`` (the mean standardised MSE per epoch).
     """
-    targets = torch.as_tensor(np.asarray(joint_targets), dtype=torch.float32)
+    targets = torch.as_tensor(np.asarray(joint_targets), dtype=torch.float32, device="cpu")
     if targets.ndim != 3:
         raise ValueError(f"joint_targets must be G x N x J, got shape {tuple(targets.shape)}")
     num_experts, steps, joints = targets.shape
@@ -183,7 +186,7 @@ def train_gait_policy(
     std = targets.reshape(-1, joints).std(0).clamp_min(1e-3)
     policy = LatentGaitPolicy(joints, latent_dim, steps_per_action=steps, periods_per_action=periods_per_action,
                               num_harmonics=num_harmonics, hidden=hidden, joint_mean=mean, joint_std=std).to(device)
-    latents = nn.Parameter(0.1 * torch.randn(num_experts, latent_dim, generator=generator).to(device))
+    latents = nn.Parameter(0.1 * torch.randn(num_experts, latent_dim, generator=generator, device="cpu").to(device))
     policy_optim = torch.optim.Adam(policy.parameters(), lr=lr)
     latent_optim = torch.optim.Adam([latents], lr=latent_lr, weight_decay=latent_weight_decay)
 
@@ -195,7 +198,7 @@ def train_gait_policy(
     schedule = torch.optim.lr_scheduler.CosineAnnealingLR(policy_optim, T_max=epochs)
     loss_history = []  # per epoch, the mean standardised MSE over its minibatches
     for _ in tqdm(range(epochs), desc="gait policy", disable=not progress):
-        order = torch.randperm(total, generator=generator).to(device)
+        order = torch.randperm(total, generator=generator, device="cpu").to(device)
         epoch_loss = torch.zeros((), device=device)
         for begin in range(0, total, batch_size):
             idx = order[begin:begin + batch_size]

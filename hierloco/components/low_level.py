@@ -42,8 +42,8 @@ class LatentJointTargets(nn.Module):
     def __init__(self, policy, low, high):
         super().__init__()
         self.policy = policy
-        self.register_buffer("low", torch.as_tensor(low, dtype=torch.float32))
-        self.register_buffer("high", torch.as_tensor(high, dtype=torch.float32))
+        self.register_buffer("low", torch.as_tensor(low, dtype=torch.float32, device="cpu"))
+        self.register_buffer("high", torch.as_tensor(high, dtype=torch.float32, device="cpu"))
 
     def forward(self, latent: torch.Tensor, phase: torch.Tensor) -> torch.Tensor:
         z = torch.maximum(torch.minimum(latent.to(self.low.dtype), self.high), self.low)

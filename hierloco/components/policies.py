@@ -41,7 +41,8 @@ class ActorPolicy(TensorDictModuleBase, TaskPolicy):
         actor: reads ``actor.in_keys`` and writes ``actor.out_keys`` (the action).
         deterministic: act with the mode of the action distribution (no exploration), as for evaluation.
 
-    It acts without gradients (``torch.no_grad``).
+    It acts without gradients (``torch.no_grad``), on the actor's device: the observation is moved there and the
+    action back to the device of the tensordict it was given (robots simulated on the CPU, an actor on a GPU).
     """
 
     def __init__(self, actor, *, deterministic: bool = True):
@@ -56,8 +57,13 @@ class ActorPolicy(TensorDictModuleBase, TaskPolicy):
 
     @torch.no_grad()
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        device = next((p.device for p in self.actor.parameters()), None) if isinstance(self.actor, torch.nn.Module) \
+            else None
         with set_interaction_type(self.interaction):
-            return self.actor(tensordict)
+            if device is None or tensordict.device in (None, device):
+                return self.actor(tensordict)
+            acted = self.actor(tensordict.select(*self.in_keys).to(device))
+            return tensordict.update({key: acted.get(key).to(tensordict.device) for key in self.out_keys})
 
 
 __all__ = ["ActorPolicy", "TaskPolicy"]

@@ -11,8 +11,11 @@ The paper's networks and optimiser are the defaults: 2 hidden layers of 512 ReLU
 ``PAPER_BATCH_SIZE``). One update is one ``SACLoss`` forward and backward, one fused Adam step and one soft target
 update; with ``compile_update=True`` the loss forward and backward are compiled with :func:`torch.compile`
 (it removes most of the Python overhead of small networks, at a one-off compile cost of about a minute on two
-cores; ``benchmarks/bench_sac.py`` measures both). Train with one torch thread (:func:`torch_threads`, the default
-of :func:`train_sac`) when cores are shared: small updates run many times faster than with two.
+cores; ``benchmarks/bench_sac.py`` measures both), with CUDA graphs on a GPU (``mode="reduce-overhead"``,
+:func:`hierloco.devices.compile_mode`; a mode name chooses another). The agent, its loss and the replay buffer live
+on ``device``; the env stays on the CPU and each env step crosses once each way (``docs/gpu.md``). Train with one
+torch thread (:func:`torch_threads`, the default of :func:`train_sac`) when cores are shared: small updates run many
+times faster than with two.
 
 Example:
     >>> import torch
@@ -44,6 +47,7 @@ from tqdm.auto import tqdm
 from torchrl.modules import MLP, ProbabilisticActor, TanhNormal, ValueOperator
 from torchrl.objectives import SACLoss, SoftUpdate
 
+from hierloco.devices import compile_mode, is_cuda
 from hierloco.io import load_checkpoint, save_checkpoint
 
 CHECKPOINT_KIND, CHECKPOINT_FORMAT = "sac_agent", 2
@@ -84,7 +88,7 @@ class SACAgent:
     config: dict
     metadata: dict = field(default_factory=dict)
     updates: int = 0
-    compile_update: bool = False
+    compile_update: bool | str = False
     _terms: Callable | None = field(default=None, repr=False)
 
     def __post_init__(self):
@@ -95,7 +99,7 @@ class SACAgent:
     def build(cls, observation_dim: int, action_low: Sequence[float], action_high: Sequence[float], *,
               hidden: int = PAPER_HIDDEN, num_layers: int = 2, lr: float = PAPER_LR, gamma: float = 0.95,
               tau: float = 0.005, alpha_init: float = 1.0, observation_key: str = "goal_observation",
-              compile_update: bool = False, seed: int = 0) -> "SACAgent":
+              compile_update: bool | str = False, seed: int = 0, device="cpu") -> "SACAgent":
         """An agent for observations of size ``observation_dim`` and actions in ``[action_low, action_high]``.
 
         Args:
@@ -106,15 +110,19 @@ class SACAgent:
             gamma: discount per step; tau: soft target-update rate.
             alpha_init: initial entropy temperature (then learned).
             compile_update: compile the loss forward and backward with :func:`torch.compile` (at the first update;
-                dynamo recompiles for each compiled agent of a process and falls back to eager after 8).
-            seed: seeds the network initialisation (the global RNG is left as it was).
+                dynamo recompiles for each compiled agent of a process and falls back to eager after 8): ``True``
+                in the mode for ``device`` (CUDA graphs on a GPU, :func:`hierloco.devices.compile_mode`), or a
+                ``torch.compile`` mode name.
+            seed: seeds the network initialisation (the global RNG is left as it was): the networks are initialised
+                on the CPU and then moved, so every device starts from the same weights.
+            device: where the networks, the loss and the optimiser live (``cpu``, ``cuda``).
         """
         config = {"observation_dim": int(observation_dim), "action_low": [float(v) for v in action_low],
                   "action_high": [float(v) for v in action_high], "hidden": int(hidden), "num_layers": int(num_layers),
                   "lr": float(lr), "gamma": float(gamma), "tau": float(tau), "alpha_init": float(alpha_init),
                   "observation_key": observation_key, "seed": int(seed)}
-        low = torch.as_tensor(config["action_low"])
-        high = torch.as_tensor(config["action_high"])
+        low = torch.as_tensor(config["action_low"], device="cpu")
+        high = torch.as_tensor(config["action_high"], device="cpu")
         if low.ndim != 1 or low.numel() == 0 or low.shape != high.shape or not torch.all(low < high):
             raise ValueError(f"bad action box: low {action_low}, high {action_high}")
         if config["observation_dim"] < 1 or config["hidden"] < 1 or config["num_layers"] < 1:
@@ -125,14 +133,16 @@ class SACAgent:
                              f"tau={tau}, alpha_init={alpha_init}")
         dim = len(low)
         cells = [config["hidden"]] * config["num_layers"]
+        box_low, box_high = low.to(device), high.to(device)  # the squashing box, where the actions are made
         with torch.random.fork_rng():
             torch.manual_seed(seed)
             net = nn.Sequential(MLP(in_features=observation_dim, out_features=2 * dim, num_cells=cells,
                                     activation_class=nn.ReLU), NormalParamExtractor())
             actor = ProbabilisticActor(
                 TensorDictModule(net, in_keys=[observation_key], out_keys=["loc", "scale"]),
-                spec=Bounded(low, high, (dim,)), in_keys=["loc", "scale"], distribution_class=TanhNormal,
-                distribution_kwargs={"low": low, "high": high}, return_log_prob=False)
+                spec=Bounded(box_low, box_high, (dim,), device=device), in_keys=["loc", "scale"],
+                distribution_class=TanhNormal, distribution_kwargs={"low": box_low, "high": box_high},
+                return_log_prob=False)
             qvalue = ValueOperator(MLP(in_features=observation_dim + dim, out_features=1, num_cells=cells,
                                        activation_class=nn.ReLU), in_keys=[observation_key, "action"])
             # SACLoss initialises the second Q network (and the target copies) from the global RNG: seed it too.
@@ -141,35 +151,58 @@ class SACAgent:
             loss = SACLoss(actor, qvalue, num_qvalue_nets=2, loss_function="l2", alpha_init=config["alpha_init"],
                            deactivate_vmap=not compile_update)
         loss.make_value_estimator(gamma=config["gamma"])
+        loss.to(device)  # the actor follows (its parameters are the loss's); the Q networks are the loss's own
+        qvalue.to(device)
         # fused: one kernel for every parameter instead of a Python loop over them
         optimizer = torch.optim.Adam(loss.parameters(), lr=config["lr"], fused=True)
         terms = _loss_terms(loss)
+        if compile_update:
+            mode = compile_mode(device) if compile_update is True else str(compile_update)
+            terms = torch.compile(terms, mode=mode)
         return cls(actor, qvalue, loss, optimizer, SoftUpdate(loss, tau=config["tau"]), config,
-                   compile_update=bool(compile_update), _terms=torch.compile(terms) if compile_update else terms)
+                   compile_update=compile_update, _terms=terms)
 
     @property
     def observation_key(self) -> str:
         return self.config["observation_key"]
 
-    def update(self, batch: TensorDictBase) -> dict:
+    @property
+    def device(self) -> torch.device:
+        """Where the networks live."""
+        return next(self.loss.parameters()).device
+
+    def update(self, batch: TensorDictBase, *, as_floats: bool = True) -> dict:
         """One gradient step on a replay batch (``M`` transitions with the observation, ``action`` and the
-        ``("next", ...)`` observation, ``reward``, ``done``, ``terminated``); returns the detached loss terms, the
-        temperature ``alpha`` and the policy ``entropy`` as floats."""
+        ``("next", ...)`` observation, ``reward``, ``done``, ``terminated``, on the agent's device); returns the
+        detached loss terms, the temperature ``alpha`` and the policy ``entropy`` as floats (``as_floats=False``:
+        as tensors on the device, so the update waits for nothing)."""
         total, terms = self._terms(batch)
         self.optimizer.zero_grad(set_to_none=True)
         total.backward()
         self.optimizer.step()
         self.target_updater.step()
         self.updates += 1
-        return {key: float(value) for key, value in terms.items()}
+        if as_floats:
+            return {key: float(value) for key, value in terms.items()}
+        return {key: value.clone() for key, value in terms.items()}  # a graphed update reuses its output memory
 
     @torch.no_grad()
     def act(self, observation: torch.Tensor, deterministic: bool = True) -> torch.Tensor:
-        """``B x D`` observations -> ``B x A`` actions: the squashed mean (``deterministic``) or a sample."""
+        """``B x D`` observations -> ``B x A`` actions (on the observations' device): the squashed mean
+        (``deterministic``) or a sample."""
         mode = InteractionType.DETERMINISTIC if deterministic else InteractionType.RANDOM
-        td = TensorDict({self.observation_key: observation}, batch_size=observation.shape[:-1])
+        td = TensorDict({self.observation_key: observation.to(self.device)}, batch_size=observation.shape[:-1])
         with set_interaction_type(mode):
-            return self.actor(td)["action"]
+            return self.actor(td)["action"].to(observation.device)
+
+    def actor_on(self, device) -> ProbabilisticActor:
+        """The actor on ``device``: itself when it is there, else a copy moved there (e.g. to act on the CPU with an
+        agent trained on a GPU)."""
+        if torch.device(device) == self.device:
+            return self.actor
+        import copy
+
+        return copy.deepcopy(self.actor).to(device)
 
     def state(self) -> dict:
         """Everything :meth:`from_state` needs (config, networks with targets and temperature, optimiser state,
@@ -178,9 +211,9 @@ class SACAgent:
                 "optimizer_state": self.optimizer.state_dict(), "updates": self.updates, "metadata": self.metadata}
 
     @classmethod
-    def from_state(cls, state: dict, *, compile_update: bool = False) -> "SACAgent":
-        """The agent :meth:`state` describes, ready to act or to resume training."""
-        agent = cls.build(**state["config"], compile_update=compile_update)
+    def from_state(cls, state: dict, *, compile_update: bool | str = False, device="cpu") -> "SACAgent":
+        """The agent :meth:`state` describes, on ``device``, ready to act or to resume training."""
+        agent = cls.build(**state["config"], compile_update=compile_update, device=device)
         agent.load_state(state)
         return agent
 
@@ -200,10 +233,12 @@ class SACAgent:
         save_checkpoint(path, CHECKPOINT_KIND, CHECKPOINT_FORMAT, self.state())
 
     @classmethod
-    def load(cls, path: str | os.PathLike, *, compile_update: bool = False, map_location="cpu") -> "SACAgent":
-        """The agent saved at ``path``, ready to act or to resume training; its ``metadata`` is the saved one."""
+    def load(cls, path: str | os.PathLike, *, compile_update: bool | str = False, map_location="cpu",
+             device="cpu") -> "SACAgent":
+        """The agent saved at ``path`` (on any device: read through ``map_location``), on ``device``, ready to act
+        or to resume training; its ``metadata`` is the saved one."""
         return cls.from_state(load_checkpoint(path, CHECKPOINT_KIND, CHECKPOINT_FORMAT, map_location),
-                              compile_update=compile_update)
+                              compile_update=compile_update, device=device)
 
 
 @contextmanager
@@ -239,7 +274,9 @@ def train_sac(env: EnvBase, agent: SACAgent, *, total_frames: int, init_random_f
 
     ``B`` is the env's batch size (robots stepped together: :class:`hierloco.envs.latent_env.LatentActionEnv`
     with many robots for a high level, :class:`hierloco.envs.velocity_command_env.VelocityCommandEnv` for SAC-SAC's
-    low level); done robots are reset one by one (``env.step_and_maybe_reset``). The first ``init_random_frames``
+    low level); done robots are reset one by one (``env.step_and_maybe_reset``). The env runs on the CPU and the
+    agent and the replay buffer on the agent's device: each step's observations cross to the agent once, its
+    actions back once, its transition into the buffer once. The first ``init_random_frames``
     frames take uniformly random actions; after that the actor explores and ``updates_per_frame`` updates per
     collected frame follow (fractions accumulate across steps), each on ``batch_size`` transitions sampled uniformly
     from the last ``buffer_size``. ``agent`` is trained in place.
@@ -278,11 +315,15 @@ def train_sac(env: EnvBase, agent: SACAgent, *, total_frames: int, init_random_f
     settings = dict(settings or {})
     key = agent.observation_key
     transition_keys = (key, "action", ("next", key), ("next", "reward"), ("next", "done"), ("next", "terminated"))
-    buffer = ReplayBuffer(storage=LazyTensorStorage(int(buffer_size)), batch_size=int(batch_size))
+    device = agent.device
+    env_device = env.device if env.device is not None else torch.device("cpu")
+    moves = device != env_device  # the agent acts and learns elsewhere than the env steps
+    storage = LazyTensorStorage(int(buffer_size), device=device) if moves else LazyTensorStorage(int(buffer_size))
+    buffer = ReplayBuffer(storage=storage, batch_size=int(batch_size))
     frames, curve, elapsed, owed = 0, [], 0.0, 0.0
     torch.manual_seed(seed)
     if checkpoint_path is not None and Path(checkpoint_path).exists():
-        state = load_checkpoint(checkpoint_path, TRAINING_KIND, TRAINING_FORMAT)
+        state = load_checkpoint(checkpoint_path, TRAINING_KIND, TRAINING_FORMAT, map_location=device)
         if state["settings"] != settings:
             changed = sorted(k for k in set(settings) | set(state["settings"])
                              if state["settings"].get(k) != settings.get(k))
@@ -292,14 +333,17 @@ def train_sac(env: EnvBase, agent: SACAgent, *, total_frames: int, init_random_f
         buffer.load_state_dict(state["buffer"])
         frames, curve, elapsed, owed = int(state["frames"]), list(state["curve"]), float(state["seconds"]), \
             float(state["owed"])
-        torch.set_rng_state(state["torch_rng"])
+        torch.set_rng_state(state["torch_rng"].cpu())
+        if "cuda_rng" in state and is_cuda(device):  # the actor's exploration draws on the GPU
+            torch.cuda.set_rng_state(state["cuda_rng"].cpu(), device)
         env.set_seed(seed + frames)  # fresh episodes after the restart
 
     def save_state():
         save_checkpoint(checkpoint_path, TRAINING_KIND, TRAINING_FORMAT, {
             "settings": settings, "agent": agent.state(), "buffer": buffer.state_dict(), "frames": frames,
             "curve": curve, "seconds": time.perf_counter() - start, "owed": owed,
-            "torch_rng": torch.get_rng_state()})
+            "torch_rng": torch.get_rng_state(),
+            **({"cuda_rng": torch.cuda.get_rng_state(device)} if is_cuda(device) else {})})
 
     b = env.batch_size[0]
     start = time.perf_counter() - elapsed
@@ -318,7 +362,11 @@ def train_sac(env: EnvBase, agent: SACAgent, *, total_frames: int, init_random_f
                     td.set("action", env.action_spec.rand())
                 else:
                     with set_interaction_type(InteractionType.RANDOM):
-                        agent.actor(td)
+                        if moves:  # the observation over, the action back: one transfer each
+                            acted = agent.actor(td.select(key).to(device, non_blocking=True))
+                            td.set("action", acted.get("action").to(env_device))
+                        else:
+                            agent.actor(td)
             transition, td = env.step_and_maybe_reset(td)
             buffer.extend(transition.select(*transition_keys))
             for name, value in diagnostics(transition["next"]).items():
@@ -331,13 +379,13 @@ def train_sac(env: EnvBase, agent: SACAgent, *, total_frames: int, init_random_f
                 tick = time.perf_counter()
                 owed += updates_per_frame * b
                 while owed >= 1:
-                    info = agent.update(buffer.sample())
+                    info = agent.update(buffer.sample(), as_floats=not moves)  # on a GPU: no wait per update
                     owed -= 1
                 seconds["update"] += time.perf_counter() - tick
             if frames >= next_log or frames >= total_frames:
                 point = {"frames": frames, "seconds": time.perf_counter() - start, "updates": agent.updates,
                          **{name: total / max(1, steps) for name, total in sums.items()},
-                         **{k: info[k] for k in ("loss_qvalue", "loss_actor", "alpha", "entropy") if k in info}}
+                         **{k: float(info[k]) for k in ("loss_qvalue", "loss_actor", "alpha", "entropy") if k in info}}
                 curve.append(point)
                 sums, steps = {}, 0
                 next_log += log_every

@@ -93,10 +93,11 @@ def train_sac_low_level(
     log_every: int = 10_000,
     checkpoint_path: str | os.PathLike | None = None,
     checkpoint_every: int = 100_000,
-    compile_update: bool = False,
+    compile_update: bool | str = False,
     torch_threads_during: int | None = 1,
     nthread: int | None = None,
     seed: int = 0,
+    device="cpu",
     progress: bool = True,
     logger=None,
 ) -> TrainedSACLowLevel:
@@ -124,6 +125,7 @@ def train_sac_low_level(
         compile_update: compile the SAC update (:meth:`SACAgent.build`).
         torch_threads_during: torch threads while training (:func:`torch_threads`).
         nthread: simulation threads. seed: networks, commands, reset noise and exploration.
+        device: where the agent, its updates and the replay buffer live (the simulation runs on the CPU).
         progress: show a progress bar. logger: anything with ``log_metrics(dict, step=)``
             (:class:`hierloco.loggers.RunLogger`); metrics are ``train/sac_low_level/...``.
 
@@ -147,7 +149,7 @@ def train_sac_low_level(
     j = robot.num_joints
     agent = SACAgent.build(env.interface.observation_size, [-1.0] * j, [1.0] * j, hidden=hidden,
                            num_layers=num_layers, lr=lr, gamma=gamma, tau=tau, alpha_init=alpha_init,
-                           observation_key="observation", compile_update=compile_update, seed=seed)
+                           observation_key="observation", compile_update=compile_update, seed=seed, device=device)
     try:
         report = train_sac(env, agent, total_frames=total_frames, init_random_frames=init_random_frames,
                            updates_per_frame=updates_per_frame, batch_size=batch_size, buffer_size=buffer_size,
@@ -194,6 +196,8 @@ class SACLowLevel(LowLevel):
         self.stochastic = bool(stochastic)
         self._rng_state = torch.Generator().manual_seed(int(seed)).get_state() if self.stochastic else None
         self.trained = trained
+        # it acts at 100 Hz on the CPU beside the simulation, whatever the device it was trained on
+        self.agent = trained.agent if trained.agent.device.type == "cpu" else SACAgent.from_state(trained.agent.state())
         self.interface = trained.interface
         self.robot = trained.interface.robot
         self.steps_per_action = int(steps_per_action)
@@ -214,7 +218,7 @@ class SACLowLevel(LowLevel):
                 "policy_frames": self.trained.metadata.get("frames"), "stochastic": self.stochastic}
 
     def _act(self, observation: np.ndarray) -> np.ndarray:
-        agent = self.trained.agent
+        agent = self.agent
         if not self.stochastic:
             return agent.act(torch.from_numpy(observation)).double().numpy()
         with torch.random.fork_rng(devices=[]):  # this low level's own stream; the global one is restored after

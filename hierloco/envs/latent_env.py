@@ -83,8 +83,8 @@ class LatentActionEnv(EnvBase):
         if low_level.num_choices is not None:
             self.action_spec = Categorical(low_level.num_choices, (b, 1), dtype=torch.int64, device=self.device)
         else:
-            low = torch.as_tensor(low_level.action_low, dtype=torch.float32)
-            high = torch.as_tensor(low_level.action_high, dtype=torch.float32)
+            low = torch.as_tensor(low_level.action_low, dtype=torch.float32, device=self.device)
+            high = torch.as_tensor(low_level.action_high, dtype=torch.float32, device=self.device)
             self.action_spec = Bounded(low.expand(b, -1), high.expand(b, -1), (b, len(low)), device=self.device)
         self.reward_spec = Unbounded((b, 1), device=self.device)
         flag = Categorical(2, (b, 1), dtype=torch.bool, device=self.device)

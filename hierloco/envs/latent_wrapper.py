@@ -55,7 +55,9 @@ class LatentActionWrapper(EnvBase):
         latent_key, phase_key: where the latent and the phase are written in the wrapped env's TensorDicts for the
             low level to read.
 
-    The action spec is the latent box (``B x Z``); observations, reward and done specs are the wrapped env's.
+    The action spec is the latent box (``B x Z``); observations, reward and done specs are the wrapped env's. A low
+    level whose network is on another device than the env (``run.low_level(device="cuda")``) runs there: the latent
+    and the phase go over and the joint targets come back at every control step.
     """
 
     def __init__(self, env: EnvBase, low_level, *, steps_per_action: int | None = None,
@@ -70,13 +72,15 @@ class LatentActionWrapper(EnvBase):
             raise ValueError("give steps_per_action, action_low and action_high with a low level that is a module")
         if isinstance(steps_per_action, bool) or int(steps_per_action) != steps_per_action or steps_per_action < 1:
             raise ValueError(f"steps_per_action must be a whole number of control steps >= 1, got {steps_per_action}")
-        low = torch.as_tensor(action_low, dtype=torch.float32)
-        high = torch.as_tensor(action_high, dtype=torch.float32)
+        low = torch.as_tensor(action_low, dtype=torch.float32, device="cpu")
+        high = torch.as_tensor(action_high, dtype=torch.float32, device="cpu")
         if low.ndim != 1 or low.shape != high.shape or not torch.all(low <= high):
             raise ValueError(f"bad latent box: low {action_low}, high {action_high}")
         super().__init__(batch_size=env.batch_size, device=env.device)
         self.env = env
         self.low_level = low_level
+        parameters = low_level.parameters() if isinstance(low_level, torch.nn.Module) else iter(())
+        self._low_level_device = next((p.device for p in parameters), None)
         self.steps_per_action = int(steps_per_action)
         self.latent_key, self.phase_key = latent_key, phase_key
         batch = tuple(env.batch_size)
@@ -105,9 +109,10 @@ class LatentActionWrapper(EnvBase):
         for n in range(1, self.steps_per_action + 1):
             inner.set(self.latent_key, latent)
             inner.set(self.phase_key, torch.full((*batch, 1), n / self.steps_per_action, device=latent.device))
-            inner = self.env.step(self.low_level(inner))
+            inner = self.env.step(self._joint_targets(inner))
             now = inner.get("next").select(*keys, strict=False)
-            done = now.get("done").reshape(batch) if "done" in now.keys() else torch.zeros(batch, dtype=torch.bool)
+            done = (now.get("done").reshape(batch) if "done" in now.keys()
+                    else torch.zeros(batch, dtype=torch.bool, device=latent.device))
             if out is None:
                 out, finished = now.clone(), done.clone()
                 reward = {key: now.get(key).clone() for key in reward_keys}
@@ -124,6 +129,14 @@ class LatentActionWrapper(EnvBase):
         for key, value in reward.items():
             out.set(key, value)
         return out
+
+    def _joint_targets(self, inner: TensorDictBase) -> TensorDictBase:
+        """The low level on ``inner``, on the low level's device when it is not the env's."""
+        device = self._low_level_device
+        if device is None or inner.device in (None, device):
+            return self.low_level(inner)
+        acted = self.low_level(inner.select(self.latent_key, self.phase_key).to(device))
+        return inner.set(self.env.action_key, acted.get(self.env.action_key).to(inner.device))
 
     def _set_seed(self, seed: int | None) -> None:
         self.env.set_seed(seed)

@@ -53,10 +53,20 @@ SUCCESS_RADIUS = 0.2  # m
 STEP_DURATION = 1.0  # s, one task step = one latent action of N = 100 steps at 100 Hz
 
 
-def _as_tensor(x, like=None):
+def _as_tensor(x, like=None, device=None):
+    """``x`` as it is when it is a tensor, else a tensor of ``like``'s dtype (float32) on ``device`` (default
+    ``like``'s device, else the CPU)."""
     if isinstance(x, torch.Tensor):
         return x
-    return torch.as_tensor(np.asarray(x), dtype=torch.float32 if like is None else like.dtype)
+    device = device if device is not None else (like.device if like is not None else "cpu")
+    return torch.as_tensor(np.asarray(x), dtype=torch.float32 if like is None else like.dtype, device=device)
+
+
+def _indices(episode, step, device) -> tuple[torch.Tensor, torch.Tensor]:
+    """``episode`` and ``step`` as broadcast int64 tensors on ``device`` (that of the states they index)."""
+    episode = _as_tensor(episode, device=device).long().to(device)
+    step = _as_tensor(step, device=device).long().to(device)
+    return torch.broadcast_tensors(episode, step)
 
 
 def _number(name: str, value, *, positive: bool = False) -> float:
@@ -119,6 +129,27 @@ class Task:
         """``... x 2`` target (a velocity in m/s or a position in m, world frame) at task step ``step``."""
         raise NotImplementedError
 
+    def on(self, name: str, device) -> torch.Tensor:
+        """The task's constant tensor ``name`` (kept on the CPU) on ``device``, copied there once: a planner on a
+        GPU indexes its targets there at every call, and a compiled (CUDA-graphed) scoring sees no CPU tensor.
+        :meth:`to_device` makes every copy ahead of such a call."""
+        tensor = getattr(self, name)
+        if tensor.device == torch.device(device):
+            return tensor
+        copies = self.__dict__.setdefault("_device_copies", {})
+        key = (name, str(device))
+        if key not in copies:
+            copies[key] = tensor.to(device)
+        return copies[key]
+
+    def to_device(self, device) -> "Task":
+        """Copies every constant tensor of the task to ``device`` once (see :meth:`on`); the task itself stays as it
+        is, on the CPU, for the simulated robots' side."""
+        for name, value in list(vars(self).items()):
+            if isinstance(value, torch.Tensor):
+                self.on(name, device)
+        return self
+
     def tracking_error(self, state, next_state, target) -> torch.Tensor:
         """``...`` the error of the transition ``state -> next_state`` (``... x 5`` world) against ``target``
         (``... x 2``, from :meth:`target`): m/s for a velocity target, m for a position."""
@@ -130,7 +161,7 @@ class Task:
         """``... x 2`` the target of task step ``step`` in the robot's local frame: a velocity (m/s) as it is, a
         position (m) relative to the robot. What a goal-conditioned policy observes."""
         state = _as_tensor(com_state)
-        episode, step = torch.broadcast_tensors(_as_tensor(episode).long(), _as_tensor(step).long())
+        episode, step = _indices(episode, step, state.device)
         target = self.target(episode, step.clamp(0, self.num_steps - 1)).to(state.dtype)
         if not self.target_is_velocity:
             target = target - state[..., :2]
@@ -141,10 +172,10 @@ class Task:
         that ends task step ``step`` (0-based) of ``episode``; all arguments broadcast together.
 
         ``tracking`` is ``w1`` times the task's error (m/s for velocity tracking, m otherwise), ``yaw`` is ``w2``
-        times the wrapped yaw error to the start yaw (rad).
+        times the wrapped yaw error to the start yaw (rad). Targets and costs are on the states' device.
         """
         state, next_state = _as_tensor(com_state), _as_tensor(next_com_state)
-        episode, step = torch.broadcast_tensors(_as_tensor(episode).long(), _as_tensor(step).long())
+        episode, step = _indices(episode, step, next_state.device)
         return self.cost_terms_to_target(state, next_state, self.target(episode, step).to(next_state.dtype))
 
     def cost_terms_to_target(self, com_state: torch.Tensor, next_com_state: torch.Tensor,
@@ -188,14 +219,14 @@ class Task:
                          tensordict.get(episode_key).squeeze(-1), tensordict.get(step_key).squeeze(-1))
         return -cost.unsqueeze(-1)
 
-    def start_state(self) -> torch.Tensor:
+    def start_state(self, device="cpu") -> torch.Tensor:
         """``5`` the CoM state of the robot at the start: at the origin facing +y, still."""
-        return torch.tensor([0.0, 0.0, self.start_yaw, 0.0, 0.0])
+        return torch.tensor([0.0, 0.0, self.start_yaw, 0.0, 0.0], device=device)
 
     def standing_costs(self) -> torch.Tensor:
         """``E x T`` per-step costs of a robot standing still at its start (the normaliser of the metric)."""
-        episodes = torch.arange(self.num_episodes)[:, None].expand(-1, self.num_steps)
-        steps = torch.arange(self.num_steps)[None, :].expand(self.num_episodes, -1)
+        episodes = torch.arange(self.num_episodes, device="cpu")[:, None].expand(-1, self.num_steps)
+        steps = torch.arange(self.num_steps, device="cpu")[None, :].expand(self.num_episodes, -1)
         start = self.start_state().expand(self.num_episodes, self.num_steps, 5)
         return self.cost(start, start, episodes, steps)
 
@@ -204,17 +235,18 @@ class Task:
 
         ``episodes`` (``E``) says which episode each row is (default ``0..E-1``). Returns per-episode results.
         """
-        states = _as_tensor(com_states).double()
+        states = _as_tensor(com_states).double().cpu()
         if states.ndim != 3 or states.shape[-1] != 5:
             raise ValueError(f"{self.name}: com_states must be E x (T + 1) x 5, got shape {tuple(states.shape)}")
         num, steps_plus_one, _ = states.shape
         if steps_plus_one - 1 != self.num_steps:
             raise ValueError(f"{self.name}: expected {self.num_steps + 1} states per episode, got {steps_plus_one}")
-        episodes = torch.arange(num) if episodes is None else _as_tensor(episodes).long().reshape(-1)
+        episodes = (torch.arange(num, device="cpu") if episodes is None
+                    else _as_tensor(episodes).long().reshape(-1).cpu())
         if episodes.shape != (num,) or bool(((episodes < 0) | (episodes >= self.num_episodes)).any()):
             raise ValueError(f"{self.name}: episodes must be {num} indices in [0, {self.num_episodes}), "
                              f"got {episodes.tolist()}")
-        steps = torch.arange(self.num_steps)[None, :].expand(num, -1)
+        steps = torch.arange(self.num_steps, device="cpu")[None, :].expand(num, -1)
         terms = self.cost_terms(states[:, :-1], states[:, 1:], episodes[:, None], steps)
         costs = self.total_cost(terms)
         standing = self.standing_costs().double()[episodes]
@@ -287,7 +319,7 @@ class VelocityTracking(Task):
                  steps_per_target: int = 5, rounds: int = 2, name: str | None = None):
         super().__init__(name)
         points = _points("velocities", velocities, "(vx, vy) pairs in m/s")
-        self.velocities = torch.as_tensor(points.astype(np.float32))
+        self.velocities = torch.as_tensor(points.astype(np.float32), device="cpu")
         self.steps_per_target = _whole("steps_per_target", steps_per_target, 1)
         self.rounds = _whole("rounds", rounds, 1)
         self.num_steps = len(self.velocities) * self.steps_per_target * self.rounds
@@ -300,7 +332,7 @@ class VelocityTracking(Task):
 
     def target(self, episode, step):
         index = (step // self.steps_per_target) % len(self.velocities)
-        return self.velocities.to(index.device)[index]
+        return self.on("velocities", index.device)[index]
 
     def tracking_error(self, state, next_state, target):
         velocity = (next_state[..., :2] - state[..., :2]) / self.step_duration
@@ -327,15 +359,15 @@ class GoalReaching(Task):
             radius = _number("radius", radius, positive=True)
             num_goals = _whole("num_goals", num_goals, 1)
             angle_offset = _number("angle_offset", angle_offset)
-            angles = angle_offset + 2 * math.pi * torch.arange(num_goals) / num_goals
+            angles = angle_offset + 2 * math.pi * torch.arange(num_goals, device="cpu") / num_goals
             goals = torch.stack([radius * torch.cos(angles), radius * torch.sin(angles)], -1)
         points = _points("goals", goals, "(x, y) positions in m")
-        self.goals = torch.as_tensor(points.astype(np.float32))
+        self.goals = torch.as_tensor(points.astype(np.float32), device="cpu")
         self.num_episodes = len(self.goals)
         self.num_steps = _whole("num_steps", num_steps, 1)
 
     def target(self, episode, step):
-        return self.goals.to(episode.device)[episode]
+        return self.on("goals", episode.device)[episode]
 
     def markers(self, episode: int | None = None) -> np.ndarray:
         """The goals ``K x 2`` (m), or goal ``episode`` alone (``1 x 2``)."""
@@ -401,14 +433,14 @@ class TrajectoryTracking(Task):
             raise ValueError("path must be finite points (m) with a positive length")
         speed = _number("speed", speed, positive=True)
         self.extra_steps = _whole("extra_steps", extra_steps, 0)
-        self.path = torch.as_tensor(points, dtype=torch.float32)
+        self.path = torch.as_tensor(points, dtype=torch.float32, device="cpu")
         self.arc_length = torch.as_tensor(np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0),
                                                                                           axis=1))]),
-                                          dtype=torch.float32)
+                                          dtype=torch.float32, device="cpu")
         self.length = float(self.arc_length[-1])
         self.speed = float(speed)
         self.num_steps = int(math.ceil(self.length / (self.speed * self.step_duration))) + self.extra_steps
-        times = (torch.arange(self.num_steps) + 1) * self.step_duration
+        times = (torch.arange(self.num_steps, device="cpu") + 1) * self.step_duration
         self.references = self.point_at(torch.clamp(self.speed * times, max=self.length))  # T x 2
 
     def point_at(self, arc: torch.Tensor) -> torch.Tensor:
@@ -419,19 +451,19 @@ class TrajectoryTracking(Task):
         return self.path[index - 1] * (1 - w) + self.path[index] * w
 
     def target(self, episode, step):
-        return self.references.to(step.device)[step.clamp(0, self.num_steps - 1)]
+        return self.on("references", step.device)[step.clamp(0, self.num_steps - 1)]
 
     def tracking_error(self, state, next_state, target):
         return torch.linalg.vector_norm(target - next_state[..., :2], dim=-1)
 
     def final_error(self, com_states, episodes):
-        end = self.path[-1].to(com_states.dtype)
+        end = self.path[-1].to(com_states.device, com_states.dtype)
         return torch.linalg.vector_norm(com_states[:, -1, :2] - end, dim=-1)
 
     def path_distance(self, positions) -> np.ndarray:
         """Distance (m) from each ``... x 2`` position to the path."""
         positions = _as_tensor(positions).double()
-        dense = self.point_at(torch.linspace(0, self.length, 4000)).double()
+        dense = self.point_at(torch.linspace(0, self.length, 4000, device="cpu")).double()
         return torch.cdist(positions.reshape(-1, 2), dense).min(-1).values.reshape(positions.shape[:-1]).numpy()
 
     def markers(self, episode: int | None = None) -> np.ndarray:

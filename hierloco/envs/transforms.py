@@ -74,9 +74,10 @@ class DisableLegs(Transform):
         super().__init__(in_keys=[], out_keys=[], in_keys_inv=[action_key], out_keys_inv=[action_key])
         self.robot = get_robot(robot)
         self.legs = tuple(self.robot.rear_legs if legs is None else legs)
-        index = torch.as_tensor(self.robot.leg_joint_indices(self.legs))
+        index = torch.as_tensor(self.robot.leg_joint_indices(self.legs), device="cpu")
         self.register_buffer("joint_index", index)
-        self.register_buffer("standing", torch.as_tensor(self.robot.standing_pose, dtype=torch.float32)[index])
+        self.register_buffer("standing", torch.as_tensor(self.robot.standing_pose, dtype=torch.float32,
+                                                         device="cpu")[index])
 
     def _inv_apply_transform(self, action: torch.Tensor) -> torch.Tensor:
         action = action.clone()
@@ -114,11 +115,12 @@ class TaskEpisode(Transform):
     def __init__(self, task, episodes: Sequence[int] | None = None, out_key: str = "task_episode"):
         super().__init__(in_keys=[], out_keys=[out_key])
         self.task = task
-        self.episodes = None if episodes is None else torch.as_tensor(episodes, dtype=torch.int64)
+        self.episodes = None if episodes is None else torch.as_tensor(episodes, dtype=torch.int64, device="cpu")
 
     def _episode_index(self, batch: torch.Size) -> torch.Tensor:
         count = batch.numel()
-        episodes = self.episodes if self.episodes is not None else torch.arange(count) % self.task.num_episodes
+        episodes = (self.episodes if self.episodes is not None
+                    else torch.arange(count, device="cpu") % self.task.num_episodes)
         if episodes.numel() != count or episodes.min() < 0 or episodes.max() >= self.task.num_episodes:
             raise ValueError(f"episodes {episodes.tolist()} do not fit {count} robots and the task's "
                              f"{self.task.num_episodes} episodes")

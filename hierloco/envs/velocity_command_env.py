@@ -260,7 +260,8 @@ class VelocityCommandEnv(EnvBase):
                        "reward_terms": Composite({term: Unbounded((b, 1), device=self.device) for term in REWARD_TERMS},
                                                  shape=(b,), device=self.device)}
         self.observation_spec = Composite(observation, shape=(b,), device=self.device)
-        self.action_spec = Bounded(-torch.ones(b, j), torch.ones(b, j), (b, j), device=self.device)
+        self.action_spec = Bounded(-torch.ones(b, j, device=self.device), torch.ones(b, j, device=self.device), (b, j),
+                                  device=self.device)
         self.reward_spec = Unbounded((b, 1), device=self.device)
         flag = Categorical(2, (b, 1), dtype=torch.bool, device=self.device)
         self.done_spec = Composite(done=flag, terminated=flag.clone(), truncated=flag.clone(), shape=(b,),

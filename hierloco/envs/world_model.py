@@ -206,6 +206,8 @@ class CoMWorldModelEnv(ModelBasedEnvBase):
         super().__init__(_StepModule(step), device=device)
         self.model = model
         self.task = task
+        if task is not None and hasattr(task, "to_device"):
+            task.to_device(self.device)
         self.cost = cost
         self.risk, self.beta = risk, float(beta)
         self.num_particles = step.particles
@@ -226,8 +228,8 @@ class CoMWorldModelEnv(ModelBasedEnvBase):
         else:
             if action_low is None or action_high is None:
                 raise ValueError("give the action box (action_low and action_high) or num_choices")
-            low = torch.as_tensor(action_low, dtype=torch.float32)
-            high = torch.as_tensor(action_high, dtype=torch.float32)
+            low = torch.as_tensor(action_low, dtype=torch.float32, device=self.device)
+            high = torch.as_tensor(action_high, dtype=torch.float32, device=self.device)
             if low.shape != high.shape or low.ndim != 1 or not torch.all(low <= high):
                 raise ValueError(f"bad action box: low {action_low}, high {action_high}")
             self.action_spec = Bounded(low, high, low.shape, device=self.device)
@@ -238,6 +240,8 @@ class CoMWorldModelEnv(ModelBasedEnvBase):
         given (:meth:`set_cost`)."""
         self.task = task
         self.world_model.module.task = task
+        if task is not None and hasattr(task, "to_device"):
+            task.to_device(self.device)  # its targets, once, where the costs are computed
 
     def set_cost(self, cost: Cost | None) -> None:
         """Scores transitions with ``cost`` from now on (``None``: the task's cost again)."""
@@ -253,12 +257,36 @@ class CoMWorldModelEnv(ModelBasedEnvBase):
         self.risk, self.beta = risk, float(beta)
         self.world_model.module.risk, self.world_model.module.beta = risk, float(beta)
 
+    def imagined_return(self, com_state: torch.Tensor, episode: torch.Tensor, step: torch.Tensor,
+                        actions: torch.Tensor) -> torch.Tensor:
+        """``B x S`` summed rewards of ``B x S x H x A`` action sequences from ``B`` measured states (``com_state``
+        ``B x 5``, ``episode`` and ``step`` ``B x 1``): what :meth:`step` gives over the horizon, summed, on tensors
+        alone (no TensorDict), so that ``torch.compile`` captures a planner's whole scoring in one graph
+        (:meth:`hierloco.components.planners.BoxPlannerBase.set_scoring`). Particles start at ``com_state``."""
+        module = self.world_model.module
+        batch, count, horizon = actions.shape[:3]
+        state = com_state.unsqueeze(1).expand(batch, count, com_state.shape[-1])
+        episode = episode.unsqueeze(1).expand(batch, count, episode.shape[-1])
+        step = step.unsqueeze(1).expand(batch, count, step.shape[-1])
+        total = com_state.new_zeros(batch, count)
+        if module.particles:
+            particles = state.unsqueeze(-2).expand(batch, count, module.particles, state.shape[-1])
+            spent = com_state.new_zeros(batch, count, module.particles)
+        for h in range(horizon):
+            if module.particles:
+                state, reward, step, particles, spent = module.particles_forward(state, actions[:, :, h], episode,
+                                                                                 step, particles, spent)
+            else:
+                state, reward, step = module(state, actions[:, :, h], episode, step)
+            total = total + reward.squeeze(-1)
+        return total
+
     def initial_state(self, com_state: torch.Tensor | None = None, episode=0, step=0) -> TensorDict:
         """A state TensorDict: ``com_state`` (default: the task's start) at ``task_episode``/``task_step``."""
         episode = torch.as_tensor(episode, dtype=torch.int64, device=self.device)
         step = torch.as_tensor(step, dtype=torch.int64, device=self.device)
         if com_state is None:
-            start = self.task.start_state() if self.task is not None else torch.zeros(5)
+            start = self.task.start_state() if self.task is not None else torch.zeros(5, device=self.device)
             com_state = start.to(self.device).expand(*torch.broadcast_shapes(episode.shape, step.shape), 5)
         com_state = torch.as_tensor(com_state, dtype=torch.float32, device=self.device)
         batch = com_state.shape[:-1]
@@ -278,4 +306,4 @@ class CoMWorldModelEnv(ModelBasedEnvBase):
                 out.update(self.initial_state(out["com_state"]).select("com_state_particles", "cost_particles"))
             return out
         batch = tensordict.batch_size if tensordict is not None else torch.Size([])
-        return self.initial_state(episode=torch.zeros(batch, dtype=torch.int64))
+        return self.initial_state(episode=torch.zeros(batch, dtype=torch.int64, device=self.device))

@@ -130,17 +130,14 @@ def check_quality_bars(c: Checker) -> None:
 
 def check_common(c: Checker, robot_checks: bool = True) -> Any:
     """Seed, device, threads, settings, robot; returns the robot description (or ``None`` when it is bad)."""
-    import torch
-
+    from hierloco.devices import device_problem
     from hierloco.envs.robots import get_robot
 
     cfg = c.cfg
     c.integer("seed", minimum=0)
-    device = str(get(cfg, "device"))
-    if device not in ("cpu", "cuda") and not device.startswith("cuda:"):
-        c.fail(f"device must be cpu or cuda, got {device!r}")
-    elif device.startswith("cuda") and not torch.cuda.is_available():
-        c.fail("device=cuda asked but no GPU is available")
+    problem = device_problem(get(cfg, "device"))
+    if problem is not None:
+        c.fail(problem)
     if get(cfg, "nthread") is not None:
         c.integer("nthread")
     settings = list(get(cfg, "settings") or [])
@@ -350,4 +347,15 @@ def prepare(cfg: DictConfig, checks: Callable[[Checker, Any], None] | None = Non
     if checks is not None:
         checks(c, robot)
     c.raise_if_any()
+    resolve_devices(cfg)
     return robot
+
+
+def resolve_devices(cfg: DictConfig) -> None:
+    """``device=auto`` becomes the device it names here (``cuda`` with a GPU, else ``cpu``: what stage keys record,
+    so a CPU machine's keys hold ``"cpu"`` as they always did; :func:`hierloco.devices.resolve_device`)."""
+    from hierloco.devices import resolve_device
+
+    if get(cfg, "device") is not None:
+        with open_dict(cfg):
+            cfg.device = resolve_device(cfg.device)

@@ -120,8 +120,11 @@ def evaluate(run_dir: str, overrides: list[str], name: str | None = None) -> flo
 
     method = method_of(run_dir)
     cfg = evaluation_config(run_dir, overrides)
+    trained = OmegaConf.load(Path(run_dir) / "config.yaml").get("device", "cpu")
     with open_dict(cfg):
         cfg.run_dir = run_dir
+        if str(cfg.get("device")) != str(trained):  # evaluated elsewhere: the trained stages keep their keys
+            cfg.trained_device = trained
     label = check_name(name) if name is not None else digest(OmegaConf.to_container(cfg, resolve=True))[:8]
     return method.main().run(cfg, evaluation_out=Path(run_dir) / "evaluations" / label)
 

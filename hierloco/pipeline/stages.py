@@ -87,6 +87,13 @@ def check_experts(run, library: ExpertLibrary) -> None:
 
 
 # ---------------------------------------------------------------------------------------------------- gait policy
+def training_device(cfg) -> str:
+    """The device the training stages were (or are) made on: ``device``, or when ``recipes/evaluate.py`` evaluates a
+    run on another device, the one it was trained on (``trained_device``), so the trained stages keep their keys
+    while the evaluations record the device they run on (``docs/gpu.md``)."""
+    return str(cfg.get("trained_device") or cfg.device)
+
+
 def gait_policy_stage(cfg, experts: Stage) -> Stage:
     """The gait policy; with ``policy.adaptive=true`` it is fitted by :func:`hierloco.components.gait_policy.
     fit_gait_policy` (longer, wider, a lower learning rate until it reproduces ``checks.min_reproduced_fraction`` of
@@ -96,7 +103,7 @@ def gait_policy_stage(cfg, experts: Stage) -> Stage:
     policy = without_defaults(section(cfg, "policy"), POLICY_DEFAULTS)
     if policy.get("adaptive"):
         policy["min_reproduced_fraction"] = cfg.checks.min_reproduced_fraction
-    params = {"seed": cfg.seed, "device": cfg.device, **policy}
+    params = {"seed": cfg.seed, "device": training_device(cfg), **policy}
     return Stage("gait_policy", params, {"experts": experts.digest}, "gait_policy.pt",
                  "hierloco.components.gait_policy:TrainedGaitPolicy",
                  build_gait_policy)
@@ -214,7 +221,7 @@ def model_params(cfg) -> dict:
 
 
 def dynamics_model_stage(cfg, data: Stage, setting: str) -> Stage:
-    params = {"seed": cfg.seed, "device": cfg.device, "duration": cfg.steps_per_action * CONTROL_TIMESTEP,
+    params = {"seed": cfg.seed, "device": training_device(cfg), "duration": cfg.steps_per_action * CONTROL_TIMESTEP,
               **model_params(cfg)}
     return Stage(f"dynamics_model_{setting}", params, {"data": data.digest}, f"dynamics_model_{setting}.pt",
                  "hierloco.components.com_model:TrainedCoMModel", build_dynamics_model)
@@ -252,11 +259,11 @@ WORLD_MODEL_DEFAULTS = {"risk": "none", "beta": 1.0}  # how the world model scor
 
 def planner_params(cfg) -> dict:
     """The ``planner`` section as an evaluation's key holds it (see :data:`PLANNER_KEYS`)."""
-    from hierloco.components.planners import PLANNERS
+    from hierloco.components.planners import PLANNERS, SCORING_DEFAULTS
     from hierloco.registry import without_defaults
 
     values = section(cfg, "planner")
-    defaults = {**PLANNERS.options(values["name"]), **WORLD_MODEL_DEFAULTS}
+    defaults = {**PLANNERS.options(values["name"]), **WORLD_MODEL_DEFAULTS, **SCORING_DEFAULTS}
     return without_defaults(values, defaults, keep=PLANNER_KEYS)
 
 

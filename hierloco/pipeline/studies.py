@@ -15,6 +15,9 @@ a finding about its setting (:class:`hierloco.errors.Finding`) is not evaluable,
 is kept (``failed.json`` in its run directory, its record) and reported from there, not run again, while the stage it
 failed in has today's key.
 
+A job may also ask for a share of a GPU (``gpus_per_job``, Ray's ``num_gpus``): its networks, training and planning
+then run on ``device=cuda`` and its simulation on its cores; without one a job runs on ``device=cpu``.
+
 Example:
     >>> jobs = [Job("lat", "outputs/lat/tiny/a1_seed0", ["preset=tiny"]), Job("lib", "outputs/lib/tiny/a1_seed0",
     ...         ["preset=tiny"])]
@@ -56,10 +59,16 @@ class Job:
     labels: dict = field(default_factory=dict)  # added to every result row (e.g. the ablation value)
     reuse_from: str | None = None  # another run directory whose finished stages this job starts from (their keys
     reuse_stages: tuple = ()       # equal to this job's own): those named here, or every one when it names none
+    device: str | None = None  # where its networks run (device=...; None: the recipe's default); not in its signature
 
     def command(self) -> list[str]:
         return [sys.executable, str(METHODS[self.method].train_script), f"run_dir={self.run_dir}",
-                f"nthread={self.cores}", *self.overrides]
+                f"nthread={self.cores}", *self.runtime_overrides(), *self.overrides]
+
+    def runtime_overrides(self) -> list[str]:
+        """What the study adds to the job's own overrides to place it (its device), before them (so the job's own
+        ``device=`` wins)."""
+        return [f"device={self.device}"] if self.device is not None else []
 
     def signature(self) -> dict:
         return {"method": self.method, "overrides": list(self.overrides)}
@@ -105,7 +114,7 @@ def planned_stages(job: Job) -> list:
     built or written."""
     from hierloco.pipeline.config import compose_recipe, prepare
 
-    cfg = compose_recipe(job.method, [f"run_dir={job.run_dir}", *job.overrides])
+    cfg = compose_recipe(job.method, [f"run_dir={job.run_dir}", *job.runtime_overrides(), *job.overrides])
     utils = METHODS[job.method].utils()
     planned = utils.plan(cfg, prepare(cfg, utils.checks))
     return [stage.spec for stage in (planned.stages() if hasattr(planned, "stages") else planned)]
@@ -375,14 +384,34 @@ def check_ray_address(address: str, timeout: float = 10.0) -> None:
                           "ray.address and RAY_ADDRESS unset for a local instance") from None
 
 
+def machine_slots(cores_per_job: int, gpus_per_job: float = 0.0, *, cores: int | None = None,
+                  gpus: int | None = None) -> tuple[int, str]:
+    """How many jobs this machine runs at once (its cores over ``cores_per_job``, and its GPUs over ``gpus_per_job``
+    when jobs ask for a share of one), and the machine in words."""
+    cores = available_cores() if cores is None else int(cores)
+    if gpus is None:
+        import torch
+
+        gpus = torch.cuda.device_count() if torch.cuda.is_available() else 0
+    slots = max(1, cores // max(1, int(cores_per_job)))
+    words = (f"{cores} cores, {gpus} GPU{'s' if gpus != 1 else ''}; "
+             f"{cores_per_job} core{'s' if cores_per_job != 1 else ''}")
+    if gpus_per_job > 0:
+        slots = min(slots, max(0, int(gpus / gpus_per_job + 1e-9)))
+        words += f" and {gpus_per_job:g} GPU"
+    words += " a job"
+    return slots, words
+
+
 def plan_text(jobs: Sequence[Job], done: dict[int, JobResult], slots: int | None,
-              records: str | None = None) -> str:
+              records: str | None = None, machine: str | None = None) -> str:
     """The study's plan: every job's state (finished here, from its record, to run) and the compute each job to run
     will take: over the stages its recipe plans that are not finished yet (in its run directory, or among the stages
     it reuses), the mean recorded build time of the same stage in the finished jobs of the same method and robot
     (this study's, and with ``records``, every recorded job of that method, preset and robot: another seed's run
-    of an earlier study estimates this seed's). Then the total, and what it is on ``slots`` jobs at once (``None``:
-    a cluster, not said)."""
+    of an earlier study estimates this seed's). Then the total, and the wall-clock it makes on ``slots`` jobs at once
+    on ``machine`` (its cores and GPUs, in words; ``slots=None``: a cluster, not said). Build times are those of the
+    machines that recorded them: a job moved to a GPU (``gpus_per_job``) is estimated from its CPU runs."""
     from hierloco.pipeline.rundir import RunDirectory
     from hierloco.pipeline.report import job_compute
 
@@ -458,7 +487,10 @@ def plan_text(jobs: Sequence[Job], done: dict[int, JobResult], slots: int | None
                + (f" ({findings} not evaluable: a finding)" if findings else "") + f", {left} to run")
     if left > unknown:
         summary += (f": about {todo_minutes:.0f} min of compute" + (f" for {left - unknown} of them" if unknown else "")
-                    + (f", about {todo_minutes / slots:.0f} min on {slots} at once" if slots else ""))
+                    + (f", about {todo_minutes / slots:.0f} min of wall-clock on {slots} at once"
+                       + (f" (this machine: {machine})" if machine else "") if slots else ""))
+    elif slots == 0:
+        summary += f"; this machine ({machine}) cannot run a job: it has too few GPUs for ray.gpus_per_job"
     if unknown:
         summary += (f"; {unknown} without an estimate (a stage that no finished or recorded job of the same "
                     "method and robot has built)")
@@ -466,15 +498,18 @@ def plan_text(jobs: Sequence[Job], done: dict[int, JobResult], slots: int | None
 
 
 def run_jobs(jobs: Sequence[Job], *, address: str | None = None, cores_per_job: int | None = None,
-             fetch_run_dirs: bool = False, records: str | None = None, dry_run: bool = False,
-             progress_every: float = 30.0) -> list[JobResult]:
+             gpus_per_job: float = 0.0, fetch_run_dirs: bool = False, records: str | None = None,
+             dry_run: bool = False, progress_every: float = 30.0) -> list[JobResult]:
     """Runs ``jobs`` through Ray (see the module docstring) and returns one :class:`JobResult` per job, in order.
+    ``gpus_per_job`` (e.g. 0.25: four jobs share a GPU) is each job's ``num_gpus``: its networks run on ``cuda``;
+    with ``0`` they run on the CPU (the keys of CPU runs and records).
     With ``records`` (a directory), every finished job leaves its record there and a job missing from its run
     directory is taken from its current record (``hierloco/pipeline/records.py``). With ``dry_run``, prints the plan
     (:func:`plan_text`) and ends the study (``SystemExit(0)``) without running or writing anything."""
     import ray
 
     check_records(records)
+    gpus_per_job = check_gpus_per_job(gpus_per_job, jobs)
     address = address or os.environ.get("RAY_ADDRESS")
     if address and not dry_run:
         check_ray_address(address)
@@ -487,6 +522,7 @@ def run_jobs(jobs: Sequence[Job], *, address: str | None = None, cores_per_job: 
             job.reuse_from = str(Path(job.reuse_from).resolve()) if job.reuse_from else None
         if cores_per_job is not None:
             job.cores = int(cores_per_job)
+        job.device = "cuda" if gpus_per_job > 0 else "cpu"  # a task without a GPU share sees none under Ray
         specs = _plan_or_none(job)
         record = None
         if specs is not None and finished(job, specs):
@@ -514,9 +550,9 @@ def run_jobs(jobs: Sequence[Job], *, address: str | None = None, cores_per_job: 
         else:
             todo.append(index)
     if dry_run:
-        cores = max(1, jobs[0].cores) if jobs else 1
-        print(plan_text(jobs, results, slots=None if address else max(1, available_cores() // cores),
-                        records=records), flush=True)
+        slots, machine = machine_slots(max(1, jobs[0].cores) if jobs else 1, gpus_per_job)
+        print(plan_text(jobs, results, slots=None if address else slots, records=records, machine=machine),
+              flush=True)
         raise SystemExit(0)
     findings = sum(r.finding for r in results.values())
     line = (f"study: {len(jobs)} jobs, {len(jobs) - len(todo) - from_records - findings} reused from their run "
@@ -537,10 +573,13 @@ def run_jobs(jobs: Sequence[Job], *, address: str | None = None, cores_per_job: 
         pending: dict = {}
 
         def submit(indices) -> None:
-            pending.update({remote.options(num_cpus=jobs[i].cores).remote(jobs[i], fetch_run_dirs): i for i in indices})
+            pending.update({remote.options(num_cpus=jobs[i].cores, num_gpus=gpus_per_job).remote(
+                jobs[i], fetch_run_dirs): i for i in indices})
 
         submit(i for i in todo if i not in waiting)
         slots = max(1, int(ray.cluster_resources().get("CPU", 1)) // max(1, jobs[todo[0]].cores))
+        if gpus_per_job > 0:
+            slots = max(1, min(slots, int(ray.cluster_resources().get("GPU", 0) / gpus_per_job + 1e-9)))
         start, last, durations = time.perf_counter(), 0.0, []
         finished_at = start
         while pending or waiting:
@@ -583,6 +622,23 @@ def run_jobs(jobs: Sequence[Job], *, address: str | None = None, cores_per_job: 
     return [results[i] for i in range(len(jobs))]
 
 
+def check_gpus_per_job(gpus_per_job, jobs: Sequence[Job] = ()) -> float:
+    """``gpus_per_job`` as a float (a fraction up to 1, or a whole number of GPUs), or a :class:`ConfigError`;
+    also refuses a job that asks for ``device=cuda`` in its overrides without a GPU share (Ray would hide the GPU)."""
+    value = 0.0 if gpus_per_job is None else gpus_per_job
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not (
+            0 <= value <= 1 or float(value).is_integer()):
+        raise ConfigError(f"ray.gpus_per_job must be 0, a fraction of a GPU (e.g. 0.25) or a whole number of GPUs, "
+                          f"got {gpus_per_job!r}")
+    if value == 0:
+        asking = [job.run_dir for job in jobs if any(o.split("=", 1)[0].lstrip("+") == "device" and
+                                                     o.split("=", 1)[1].startswith("cuda") for o in job.overrides)]
+        if asking:
+            raise ConfigError(f"{len(asking)} job(s) ask for device=cuda (e.g. {asking[0]}) but ray.gpus_per_job is 0: "
+                              "give each a GPU share (ray.gpus_per_job=0.25)")
+    return float(value)
+
+
 def _waiting(jobs: Sequence[Job], todo: Sequence[int]) -> dict[int, int]:
     """The jobs to run that start from another job to run (``reuse_from`` its run directory): job -> that job. They
     are submitted when it ends, so they start from its finished stages."""
@@ -618,6 +674,6 @@ def run_here(job: Job) -> list[dict]:
     return outcome["rows"]
 
 
-__all__ = ["DONE", "Job", "JobResult", "check_ray_address", "check_records", "evaluation_rows", "execute", "finished",
-           "plan_text", "planned_stages", "recorded", "report_failures", "resolve_method", "rows_of", "run_here",
-           "run_jobs"]
+__all__ = ["DONE", "Job", "JobResult", "check_gpus_per_job", "check_ray_address", "check_records", "evaluation_rows",
+           "execute", "finished", "machine_slots", "plan_text", "planned_stages", "recorded", "report_failures",
+           "resolve_method", "rows_of", "run_here", "run_jobs"]

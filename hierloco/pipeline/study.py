@@ -90,9 +90,10 @@ def seed_problems(seeds) -> list[str]:
 
 def run_study(cfg, jobs: Sequence[Job]) -> list[JobResult]:
     """Runs ``jobs`` with the study config's Ray options (``ray.address``, ``ray.cores_per_job``,
-    ``ray.fetch_run_dirs``), ``records`` and ``dry_run``."""
+    ``ray.gpus_per_job``, ``ray.fetch_run_dirs``), ``records`` and ``dry_run``."""
     ray = cfg.get("ray") or {}
     return run_jobs(jobs, address=ray.get("address"), cores_per_job=ray.get("cores_per_job"),
+                    gpus_per_job=ray.get("gpus_per_job", 0),
                     fetch_run_dirs=bool(ray.get("fetch_run_dirs", False)), records=cfg.get("records"),
                     dry_run=bool(cfg.get("dry_run", False)))
 

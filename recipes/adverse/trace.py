@@ -57,12 +57,13 @@ def trace(run_dir: str, setting: str, task_name: str, *, nthread: int | None = N
     trained = run.com_model("normal" if is_unadapted(setting) else setting)
     low_level = run.low_level(task.num_episodes)
     rollout = evaluation_rollout(run.robot, params, task, low_level, trained, nthread=nthread)
+    trained.model.cpu()  # planned on the evaluation's device; the analysis below runs on the CPU
     result = rollout.result
-    states = torch.as_tensor(result.com_states)  # E x (T + 1) x 5
-    features = torch.as_tensor(low_level.action_features(rollout.actions), dtype=torch.float32)
+    states = torch.as_tensor(result.com_states, device="cpu")  # E x (T + 1) x 5
+    features = torch.as_tensor(low_level.action_features(rollout.actions), dtype=torch.float32, device="cpu")
     errors = prediction_errors(trained.model, states, features).numpy()  # E x T x 5
-    episodes = torch.arange(len(states))[:, None] % task.num_episodes
-    steps = torch.arange(task.num_steps)[None, :]
+    episodes = torch.arange(len(states), device="cpu")[:, None] % task.num_episodes
+    steps = torch.arange(task.num_steps, device="cpu")[None, :]
     with torch.no_grad():
         predicted = trained.model.predict(states[:, :-1].float(), features).double()
     predicted_cost = task.cost(states[:, :-1], predicted, episodes, steps).numpy()

@@ -37,6 +37,8 @@ def check_high_level(c: config.Checker) -> None:
     for key in ("sac.lr", "sac.updates_per_frame", "sac.tau"):
         c.positive(key)
     c.fraction("sac.gamma")
+    if not isinstance(config.get(c.cfg, "sac.compile", False), bool):
+        c.fail(f"sac.compile must be true or false, got {config.get(c.cfg, 'sac.compile')!r}")
     if list(c.cfg.settings) != ["normal"]:
         c.fail(f"the SAC high level runs the normal setting only, got settings={list(c.cfg.settings)}")
 
@@ -72,9 +74,21 @@ def sac_stage(cfg, name: str, spec: dict, low_level: dict) -> Stage:
     """The SAC agent of task ``name``, trained on its training split whichever split is evaluated (``split: train``
     evaluates the training targets only, as tuning does: the same agent, so its key leaves the split out)."""
     trained_on = {k: v for k, v in spec.items() if k != "split"}
-    params = {"seed": cfg.seed, "device": cfg.device, "task_name": name, "task": trained_on, **section(cfg, "sac")}
+    params = {"seed": cfg.seed, "device": stages.training_device(cfg), "task_name": name, "task": trained_on,
+              **sac_params(cfg)}
     return Stage(f"sac_{name}", params, {"low_level": low_level}, f"sac_{name}.pt", "hierloco.components.sac:SACAgent",
                  train_high_level)
+
+
+SAC_DEFAULTS = {"compile": False}  # options added later: keyed only when they differ (docs/pipeline.md)
+
+
+def sac_params(cfg) -> dict:
+    """The ``sac`` section as a SAC stage's key holds it: every option it always held, and ``compile`` only when
+    it is on (:func:`hierloco.registry.without_defaults`), so runs and records made before it keep their keys."""
+    from hierloco.registry import without_defaults
+
+    return without_defaults(section(cfg, "sac"), SAC_DEFAULTS)
 
 
 def sac_evaluation_stage(cfg, name: str, spec: dict, agent: Stage) -> Stage:
@@ -93,7 +107,7 @@ def task_env(low_level, task: Task, num_robots: int, seed: int, nthread: int | N
     from hierloco.envs.latent_env import LatentActionEnv
     from hierloco.envs.transforms import GoalObservation, task_transforms
 
-    episodes = torch.arange(num_robots) % task.num_episodes
+    episodes = torch.arange(num_robots, device="cpu") % task.num_episodes
     env = LatentActionEnv(low_level, num_robots=num_robots, seed=seed, nthread=nthread)
     return TransformedEnv(env, Compose(task_transforms(task, episodes), GoalObservation(task)))
 
@@ -107,7 +121,8 @@ def train_high_level(run, params, make_low_level) -> SACAgent:
     task = make_task_from_spec(params["task_name"], params["task"]).training_split()
     low_level = make_low_level(params["num_robots"])
     agent = SACAgent.build(GoalObservation.SIZE, low_level.action_low, low_level.action_high, hidden=params["hidden"],
-                           lr=params["lr"], gamma=params["gamma"], tau=params["tau"], seed=params["seed"])
+                           lr=params["lr"], gamma=params["gamma"], tau=params["tau"], seed=params["seed"],
+                           device=params["device"], compile_update=params.get("compile", False))
     env = task_env(low_level, task, params["num_robots"], params["seed"], nthread=run.nthread)
     try:
         agent.metadata = train_sac(env, agent, total_frames=params["total_frames"],
@@ -123,7 +138,9 @@ def train_high_level(run, params, make_low_level) -> SACAgent:
 
 
 def build_evaluation(run, params, agent: SACAgent, make_low_level) -> TaskEvaluation:
-    """The trained policy (its mean action) on every target of a task, one robot per episode."""
+    """The trained policy (its mean action) on every target of a task, one robot per episode. It acts on the CPU
+    whatever the device it was trained on (the key holds no device): the agent just trained and the one loaded
+    from its checkpoint act alike."""
     from hierloco.components.evaluation import run_task
     from hierloco.components.policies import ActorPolicy
     from hierloco.envs.latent_env import LatentActionEnv
@@ -133,7 +150,7 @@ def build_evaluation(run, params, agent: SACAgent, make_low_level) -> TaskEvalua
     env = LatentActionEnv(make_low_level(task.num_episodes), num_robots=task.num_episodes, record=True,
                           seed=params["seed"], nthread=run.nthread)
     try:
-        rollout = run_task(env, ActorPolicy(agent.actor), task, transforms=[GoalObservation(task)],
+        rollout = run_task(env, ActorPolicy(agent.actor_on("cpu")), task, transforms=[GoalObservation(task)],
                            progress=run.progress)
     finally:
         env.close()

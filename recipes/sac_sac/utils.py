@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from hierloco.pipeline import config
+from hierloco.pipeline import config, stages
 from hierloco.pipeline.plan import JsonReport, Plan, Stage
 from recipes.sac_sac.report import write_low_level_report
 from recipes.sac import utils as sac
@@ -38,7 +38,7 @@ def plan(cfg, robot) -> Plan:
     """SAC low level -> its tracking report -> per main task: a SAC high level over the command, its evaluations."""
     from hierloco.envs.robots import robot_fingerprint
 
-    low = Stage("sac_low_level", {"seed": cfg.seed, **config.section(cfg, "low_level")},
+    low = Stage("sac_low_level", {"seed": cfg.seed, **config.section(cfg, "low_level"), **low_level_device(cfg)},
                 {"robot": robot_fingerprint(robot)}, "sac_low_level.pt",
                 "hierloco.components.sac_low_level:TrainedSACLowLevel", build_low_level)
     report = Stage("sac_low_level_tracking", {"seed": cfg.seed, "steps_per_action": cfg.steps_per_action,
@@ -47,6 +47,13 @@ def plan(cfg, robot) -> Plan:
     low_level = {"kind": "sac_command", "sac_low_level": low.digest, "steps_per_action": cfg.steps_per_action,
                  "actor": cfg.low_level_actor}
     return Plan(low_level=low, low_level_tracking=report, tasks=sac.high_level_stages(cfg, low_level))
+
+
+def low_level_device(cfg) -> dict:
+    """``{"device": ...}`` when the low level trains elsewhere than on the CPU, else ``{}``: its key held no device
+    before it could train on a GPU, so CPU runs and records keep their keys."""
+    device = stages.training_device(cfg)
+    return {} if device == "cpu" else {"device": device}
 
 
 def build_low_level(run, params) -> TrainedSACLowLevel:

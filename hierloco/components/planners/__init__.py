@@ -21,20 +21,28 @@ from hierloco.components.planners.exhaustive import ExhaustivePlanner
 from hierloco.components.planners.mppi import BoxMPPIPlanner
 from hierloco.components.planners.random_shooting import RandomShootingPlanner
 
-COMMON = ("name", "horizon", "risk", "beta")  # keys of a planner section that are no planner's own options (risk and
-# beta tell the world model how to score a plan under a model with members: hierloco.envs.world_model)
+COMMON = ("name", "horizon", "risk", "beta", "compile", "precision")  # keys of a planner section that are no planner's
+# own options (risk and beta tell the world model how to score a plan under a model with members:
+# hierloco.envs.world_model; compile and precision how every planner scores: BoxPlannerBase.set_scoring)
+SCORING_DEFAULTS = {"compile": False, "precision": "fp32"}
 
 
-def make_planner(world_model, *, name: str = "random_shooting", horizon: int = 1, seed: int = 0, **options):
-    """The planner registered as ``name`` over ``world_model``, looking ``horizon`` actions ahead.
+def make_planner(world_model, *, name: str = "random_shooting", horizon: int = 1, seed: int = 0,
+                 compile: bool = False, precision: str = "fp32", **options):
+    """The planner registered as ``name`` over ``world_model``, looking ``horizon`` actions ahead, scoring with
+    ``compile`` and ``precision`` (:meth:`BoxPlannerBase.set_scoring`).
 
     ``options`` may hold the options of every planner (one config section serves them all): each planner takes
     its own (:meth:`hierloco.registry.Registry.options`) and ignores the others."""
     cls = PLANNERS[name]
     own = PLANNERS.select(name, options)
     if "finite" in cls.ACTION_SPACES and "box" not in cls.ACTION_SPACES:
-        return cls(world_model, planning_horizon=horizon, **own)
-    return cls(world_model, planning_horizon=horizon, seed=seed, **own)
+        planner = cls(world_model, planning_horizon=horizon, **own)
+    else:
+        planner = cls(world_model, planning_horizon=horizon, seed=seed, **own)
+    if compile or precision != "fp32":  # a registered planner that is no BoxPlannerBase is left as it is
+        planner.set_scoring(compile=compile, precision=precision)
+    return planner
 
 
 def check_planner_options(name: str, section: Mapping[str, Any], *, action_space: str = "box") -> list[str]:
@@ -43,6 +51,7 @@ def check_planner_options(name: str, section: Mapping[str, Any], *, action_space
     model). Empty when all is well."""
     import torch
 
+    from hierloco.devices import PRECISIONS
     from hierloco.envs.world_model import CoMWorldModelEnv
 
     known = {option for other in PLANNERS.names() for option in PLANNERS.options(other)}
@@ -50,6 +59,11 @@ def check_planner_options(name: str, section: Mapping[str, Any], *, action_space
                 for key in section if key not in known and key not in COMMON]
     own = PLANNERS.select(name, section)
     problems += PLANNERS.check_options(name, own)
+    if not isinstance(section.get("compile", False), bool):
+        problems.append(f"planner.compile must be true or false, got {section.get('compile')!r}")
+    if section.get("precision", "fp32") not in PRECISIONS:
+        problems.append(f"unknown precision {section.get('precision')!r} (planner.precision: choose from "
+                        f"{', '.join(PRECISIONS)})")
     if problems:
         return problems
 
@@ -65,5 +79,5 @@ def check_planner_options(name: str, section: Mapping[str, Any], *, action_space
     return problems
 
 
-__all__ = ["PLANNERS", "BoxCEMPlanner", "BoxMPPIPlanner", "BoxPlannerBase", "ExhaustivePlanner",
+__all__ = ["PLANNERS", "SCORING_DEFAULTS", "BoxCEMPlanner", "BoxMPPIPlanner", "BoxPlannerBase", "ExhaustivePlanner",
            "RandomShootingPlanner", "check_planner_options", "make_planner"]

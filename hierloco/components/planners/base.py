@@ -6,6 +6,11 @@ sums the rewards over the horizon (Li et al., RA-L 2021, Sec. III-A.2, Eq. 1). E
 :class:`hierloco.components.policies.TaskPolicy`: :meth:`BoxPlannerBase.begin_task` re-targets the world model to a
 task and forgets the warm start.
 
+The planner runs on its world model's device: a call moves the measured state there (one transfer) and returns the
+action on the device of the state it was given, so a planner on CUDA drives robots simulated on the CPU.
+:meth:`BoxPlannerBase.set_scoring` compiles the scoring (``torch.compile``, CUDA graphs on a GPU) and sets its
+matrix-product precision (``fp32``, ``tf32``, ``bf16``; ``docs/gpu.md``).
+
 Warm starts are kept per batch row (per robot): a row starts from its own previous plan only while its episode goes
 on. A call to the planner (``planner(tensordict)``, as ``env.rollout`` and TorchRL collectors make it) reads, when
 present, ``is_init`` (TorchRL's :class:`~torchrl.envs.transforms.InitTracker`: true on the first step of an
@@ -22,6 +27,7 @@ from torchrl.data import Categorical
 from torchrl.modules.planners import MPCPlannerBase
 
 from hierloco.components.policies import TaskPolicy
+from hierloco.devices import check_precision, compile_mode, precision_context
 from hierloco.registry import Registry
 
 # The planners by name (``planner.name``): a new planner is one subclass of :class:`BoxPlannerBase` decorated with
@@ -47,6 +53,7 @@ class BoxPlannerBase(MPCPlannerBase, TaskPolicy):
 
     Attributes:
         warm_rows: ``B`` bool, the rows whose last plan started from their previous plan (``None`` before a call).
+        compile, precision: how candidates are scored (:meth:`set_scoring`; default eager, ``fp32``).
     """
 
     ACTION_SPACES = ("box",)  # what it plans over: "box" (a continuous box), "finite" (a set of choices)
@@ -64,8 +71,8 @@ class BoxPlannerBase(MPCPlannerBase, TaskPolicy):
         self.num_candidates = int(num_candidates)
         self.discrete = isinstance(env.action_spec, Categorical)
         if self.discrete:
-            self.register_buffer("low", torch.zeros(1))
-            self.register_buffer("high", torch.full((1,), float(env.action_spec.n - 1)))
+            self.register_buffer("low", torch.zeros(1, device=env.device))
+            self.register_buffer("high", torch.full((1,), float(env.action_spec.n - 1), device=env.device))
         else:
             self.register_buffer("low", env.action_spec.space.low.clone().float())
             self.register_buffer("high", env.action_spec.space.high.clone().float())
@@ -75,6 +82,23 @@ class BoxPlannerBase(MPCPlannerBase, TaskPolicy):
         self._marks: dict[str, torch.Tensor] = {}  # B, the step and episode of each row's last plan
         self._keep = None  # B bool while a call plans: the rows whose warm start is still theirs
         self.warm_rows = None
+        self.compile, self.precision, self._imagined_return = False, "fp32", None
+
+    def set_scoring(self, *, compile: bool = False, precision: str = "fp32") -> "BoxPlannerBase":
+        """How candidates are scored from now on (``planner.compile``, ``planner.precision``).
+
+        Args:
+            compile: score through the world model's tensor function (``imagined_return``, when it has one) compiled
+                with ``torch.compile``: with CUDA graphs on a GPU (``mode="reduce-overhead"``), plain on the CPU.
+                Each batch shape compiles once (a one-off cost). ``False``: the TorchRL env steps, as always.
+            precision: ``fp32``; ``tf32`` (TensorFloat-32 matrix products on CUDA); ``bf16`` (the model's matrix
+                products autocast to bfloat16). Costs are summed in float32 either way.
+        """
+        if not isinstance(compile, bool):
+            raise ValueError(f"compile must be true or false, got {compile!r}")
+        self.compile, self.precision = compile, check_precision(precision)
+        self._imagined_return = None
+        return self
 
     @property
     def action_dim(self) -> int:
@@ -87,18 +111,25 @@ class BoxPlannerBase(MPCPlannerBase, TaskPolicy):
 
     def forward(self, tensordict: TensorDictBase, tensordict_out: TensorDictBase | None = None,
                 **kwargs) -> TensorDictBase:
-        """Plans from the states in ``tensordict`` and writes ``action``; each row keeps its warm start only while
-        its episode goes on (see the module doc)."""
-        td = self._flat(tensordict)
+        """Plans from the states in ``tensordict`` and writes ``action`` (on the device of ``tensordict``); each row
+        keeps its warm start only while its episode goes on (see the module doc)."""
+        if "params" in kwargs or "vmap" in kwargs:
+            raise ValueError("planners do not support functional calls")
+        device = self.low.device
+        source = _device_of(tensordict, self.in_keys)
+        here = tensordict
+        if source != device:  # the measured state, once, to the planner's device
+            here = tensordict.select(*self.in_keys, self.init_key, "_reset", strict=False).to(device)
+        td = self._flat(here)
         self._keep = self.continuing_rows(td)
         self.warm_rows = torch.zeros_like(self._keep)  # planners without warm starts leave it so
         try:
-            out = super().forward(tensordict, tensordict_out, **kwargs)
+            action = self.action_spec.project(self.planning(here))
         finally:
             self._keep = None
         self._marks = {key: td.get(key).reshape(td.batch_size[0], -1)[:, 0].clone()
                        for key in (self.step_key, self.episode_key) if key in td.keys()}
-        return out
+        return self._write_to_tensordict(tensordict, (action.to(source),), tensordict_out)
 
     def continuing_rows(self, tensordict: TensorDictBase) -> torch.Tensor:
         """``B`` bool: the rows of a ``B``-batch of states that go on with the episode of their previous plan.
@@ -132,27 +163,43 @@ class BoxPlannerBase(MPCPlannerBase, TaskPolicy):
     def sample_uniform(self, batch: int, count: int) -> torch.Tensor:
         """``batch x count x H x A`` action sequences uniform in the box."""
         shape = (batch, count, self.planning_horizon, self.action_dim)
-        unit = torch.rand(shape, generator=self.generator, device=self.low.device)
+        unit = torch.rand(shape, generator=self.generator, device=self.generator.device)
         return self.low + (self.high - self.low) * unit
+
+    def sample_normal(self, shape) -> torch.Tensor:
+        """Standard normal draws of ``shape`` from the planner's generator, on its device."""
+        return torch.randn(shape, generator=self.generator, device=self.generator.device)
 
     def clip(self, actions: torch.Tensor) -> torch.Tensor:
         return torch.maximum(torch.minimum(actions, self.high), self.low)
 
     @torch.no_grad()
     def score(self, tensordict: TensorDictBase, actions: torch.Tensor) -> torch.Tensor:
-        """Summed rewards ``B x S`` of the ``B x S x H x A`` action sequences from the states in ``tensordict``."""
-        batch, count = actions.shape[:2]
-        td = tensordict.select(*self.in_keys).unsqueeze(-1).expand(batch, count).clone()
-        total = torch.zeros(batch, count, device=actions.device)
-        for h in range(actions.shape[2]):
-            action = actions[:, :, h]
-            if self.discrete:
-                action = action.round().long()
-            td.set("action", action)
-            td = self.env.step(td)
-            total += td.get(("next", "reward")).reshape(batch, count)
-            td = td.get("next")
-        return total
+        """Summed rewards ``B x S`` of the ``B x S x H x A`` action sequences from the states in ``tensordict``, in
+        the scoring's precision; compiled (:meth:`set_scoring`), through the world model's ``imagined_return``."""
+        with precision_context(self.precision, actions.device):
+            if self.compile and hasattr(self.env, "imagined_return"):
+                return self._compiled_return()(
+                    tensordict.get("com_state"), tensordict.get(self.episode_key), tensordict.get(self.step_key),
+                    actions.round().long() if self.discrete else actions)
+            batch, count = actions.shape[:2]
+            td = tensordict.select(*self.in_keys).unsqueeze(-1).expand(batch, count).clone()
+            total = torch.zeros(batch, count, device=actions.device)
+            for h in range(actions.shape[2]):
+                action = actions[:, :, h]
+                if self.discrete:
+                    action = action.round().long()
+                td.set("action", action)
+                td = self.env.step(td)
+                total += td.get(("next", "reward")).reshape(batch, count)
+                td = td.get("next")
+            return total
+
+    def _compiled_return(self):
+        if self._imagined_return is None:
+            self._imagined_return = torch.compile(self.env.imagined_return, mode=compile_mode(self.low.device),
+                                                  dynamic=False)
+        return self._imagined_return
 
     def initial_mean(self, batch: int) -> torch.Tensor:
         """``batch x H x A``: per row, its warm start while its episode goes on (:meth:`continuing_rows`), else the
@@ -182,3 +229,13 @@ class BoxPlannerBase(MPCPlannerBase, TaskPolicy):
         if self.discrete:
             action = action.round().long()
         return action[0] if tensordict.batch_dims == 0 else action
+
+
+def _device_of(tensordict: TensorDictBase, keys) -> torch.device:
+    """The device of ``tensordict`` (of its first key among ``keys`` when it has none of its own)."""
+    if tensordict.device is not None:
+        return tensordict.device
+    for key in keys:
+        if key in tensordict.keys():
+            return tensordict.get(key).device
+    return torch.device("cpu")

@@ -33,11 +33,11 @@ class BoxCEMPlanner(BoxPlannerBase):
         batch = td.batch_size[0]
         mean = self.initial_mean(batch)
         std = ((self.high - self.low) / 2).expand_as(mean)
-        best_score = torch.full((batch,), -torch.inf)
+        best_score = torch.full((batch,), -torch.inf, device=mean.device)
         best_plan = mean.clone()
-        rows = torch.arange(batch)
+        rows = torch.arange(batch, device=mean.device)
         for _ in range(self.optim_steps):
-            noise = torch.randn((batch, self.num_candidates, *mean.shape[1:]), generator=self.generator)
+            noise = self.sample_normal((batch, self.num_candidates, *mean.shape[1:]))
             candidates = self.clip(mean[:, None] + std[:, None] * noise)
             scores = self.score(td, candidates)
             top_scores, top = scores.topk(self.top_k, dim=1)

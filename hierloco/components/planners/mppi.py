@@ -33,7 +33,7 @@ class BoxMPPIPlanner(BoxPlannerBase):
         mean = self.initial_mean(batch)
         std = self.noise_scale * (self.high - self.low) / 2
         for _ in range(self.optim_steps):
-            noise = torch.randn((batch, self.num_candidates, *mean.shape[1:]), generator=self.generator)
+            noise = self.sample_normal((batch, self.num_candidates, *mean.shape[1:]))
             candidates = self.clip(mean[:, None] + std * noise)
             scores = self.score(td, candidates)
             weights = torch.softmax((scores - scores.max(1, keepdim=True).values) / self.temperature, dim=1)

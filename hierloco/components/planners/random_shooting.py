@@ -31,6 +31,6 @@ class RandomShootingPlanner(BoxPlannerBase):
         td = self._flat(tensordict)
         candidates = self.sample_uniform(td.batch_size[0], self.num_candidates)
         best = self.score(td, candidates).argmax(1)
-        plan = candidates[torch.arange(len(best)), best]  # B x H x A
+        plan = candidates[torch.arange(len(best), device=best.device), best]  # B x H x A
         self._previous = plan
         return self._output(tensordict, plan[:, 0])
