@@ -237,11 +237,12 @@ def test_planners_under_a_meta_default_device(tiny_lat, planner):
 def test_evaluation_plans_every_robot_of_a_task_in_one_call_per_action(tiny_lat, monkeypatch):
     """Closed-loop evaluation batches the task's robots: one planner call per task step, over all its episodes at
     once (on a GPU: one transfer each way per action, not one per robot)."""
+    from hierloco.components import evaluation
     from hierloco.envs.tasks import make_task
     from hierloco.pipeline import stages
 
     calls = []
-    run_task = stages.run_task
+    run_task = evaluation.run_task
 
     def counting(env, planner, task, **options):
         forward = planner.forward
@@ -253,7 +254,7 @@ def test_evaluation_plans_every_robot_of_a_task_in_one_call_per_action(tiny_lat,
         planner.forward = counted
         return run_task(env, planner, task, **options)
 
-    monkeypatch.setattr(stages, "run_task", counting)
+    monkeypatch.setattr(evaluation, "run_task", counting)  # what the evaluation stage imports when it runs
     task = make_task("goal_reaching", num_goals=3, num_steps=2)
     params = {"setting": "normal", "seed": 0, "device": "cpu", "planner": {"name": "random_shooting", **PLANNER}}
     stages.evaluation_rollout(tiny_lat["robot"], params, task, tiny_lat["low_level"], tiny_lat["mlp"], nthread=1)

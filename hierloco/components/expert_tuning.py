@@ -16,7 +16,7 @@ for a latent gait policy that reproduces them in simulation (:func:`hierloco.com
    servo gains around the two best; then, only when nothing passes, smaller command boxes.
 2. **verification** of the best candidates, in order, while the budget lasts: the expert library exactly as the
    experts stage builds it, its tracking check, and a gait policy trained and checked in simulation
-   (:func:`hierloco.components.gait_policy.fit_gait_policy`, which adapts the training when the first fit falls
+   (:func:`hierloco.components.gait_policy_fit.fit_gait_policy`, which adapts the training when the first fit falls
    short of the bar: it always tries twice the epochs). The first candidate whose gait policy passes as configured
    is the one found; when only an adapted fit passes, the next candidates are verified too while the budget
    allows another verification, and failing a better one, the adapted fit's ``policy`` overrides are part of what
@@ -454,7 +454,7 @@ class Verification:
         candidate: what was verified. report: the library's tracking report (``None`` when it was not built).
         replayed_fraction: the library's own targets replayed open loop, within 0.05 m/s.
         reproduced_fraction: the gait policy's check (``None`` when no policy was trained).
-        policy_attempts: the gait-policy fits tried (:class:`hierloco.components.gait_policy.GaitPolicyFit`).
+        policy_attempts: the gait-policy fits tried (:class:`hierloco.components.gait_policy_fit.GaitPolicyFit`).
         problem: why it does not walk, in one line (empty when it does). seconds: how long it took.
     """
 
@@ -642,8 +642,8 @@ def verify_candidate(robot: RobotSpec, candidate: Candidate, *, num_experts: int
                      steps_per_action: int, policy: dict | None, min_reach: float, min_reproduced_fraction: float,
                      seed: int, budget_seconds: float, log: Callable[[str], None]) -> Verification:
     """Checks one candidate as the pipeline runs it: :func:`build_expert_library` (the reference IK), its tracking
-    report, the library replayed open loop, and :func:`hierloco.components.gait_policy.fit_gait_policy`."""
-    from hierloco.components.gait_policy import fit_gait_policy
+    report, the library replayed open loop, and :func:`hierloco.components.gait_policy_fit.fit_gait_policy`."""
+    from hierloco.components.gait_policy_fit import fit_gait_policy
 
     tic = time.perf_counter()
     tuned = candidate.params.apply(robot)

@@ -118,7 +118,7 @@ def build_gait_policy(run, params, library: ExpertLibrary) -> TrainedGaitPolicy:
     fit_options = {key: params[key] for key in ("adaptive", "budget_epochs", "min_reproduced_fraction") if key in params}
     train = {key: value for key, value in params.items() if key not in fit_options}
     if fit_options.pop("adaptive", False):
-        from hierloco.components.gait_policy import fit_gait_policy
+        from hierloco.components.gait_policy_fit import fit_gait_policy
 
         fit = fit_gait_policy(library, robot=run.robot, periods_per_action=periods, progress=run.progress,
                               **fit_options, **train)

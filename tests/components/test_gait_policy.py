@@ -8,10 +8,10 @@ import torch
 
 from hierloco.components.evaluation import check_gait_policy
 from hierloco.components.expert_library import build_expert_library
+from hierloco.components.gait_policy_fit import fit_gait_policy
 from hierloco.components.gait_policy import (
     LatentGaitPolicy,
     TrainedGaitPolicy,
-    fit_gait_policy,
     train_gait_policy,
 )
 from hierloco.components.low_level import LatentLowLevel

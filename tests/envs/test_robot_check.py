@@ -27,10 +27,11 @@ from hierloco.envs.robots.check import (
     EXIT_NOT_FOUND,
     MIN_FOOT_DROP,
     description_problems,
-    main,
     standing_statics,
     suggested_standing_pose,
 )
+
+from hierloco.envs.robots.check.__main__ import main  # the command line
 
 REPO = Path(__file__).resolve().parents[2]
 FIXTURES = REPO / "tests" / "fixtures"

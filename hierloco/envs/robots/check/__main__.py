@@ -1,0 +1,141 @@
+"""``hierloco-robot-check ROBOT`` (``python -m hierloco.envs.robots.check``): the description's problems in
+milliseconds (:mod:`hierloco.envs.robots.check`), then the search of the expert controller's parameters
+(:func:`hierloco.components.expert_tuning.tune_expert_parameters`) and the YAML lines to paste (``docs/robots.md``).
+"""
+
+from __future__ import annotations
+
+import math
+
+from hierloco.envs.robots.check import (
+    EXIT_FOUND,
+    EXIT_NOT_FOUND,
+    description_problems,
+    description_summary,
+)
+
+
+def tracking_table(axes) -> list[str]:
+    """A Markdown table of :class:`hierloco.components.expert_library.AxisTracking` rows."""
+    lines = ["| axis | commanded | achieved | achieved ~ slope x command + offset | reach towards low / high edge |"
+             " ok |", "|---|---|---|---|---|---|"]
+    for a in axes:
+        lines.append(f"| {a.axis} ({a.unit}) | {a.command_low:+.2f} .. {a.command_high:+.2f} | {a.achieved_low:+.2f} .."
+                     f" {a.achieved_high:+.2f} | {a.slope:.2f} x command {a.offset:+.3f} | {a.reach_low:.0%} / "
+                     f"{a.reach_high:.0%} (need {a.min_reach:.0%}) | {'yes' if a.ok else 'no'} |")
+    return lines
+
+
+def main(argv=None) -> int:
+    """``hierloco-robot-check ROBOT``: the description's problems in milliseconds, then the search (see the module
+    docstring). Returns the exit status: 0 found, 2 not found or bad input."""
+    import argparse
+    import sys
+    import time
+
+    parser = argparse.ArgumentParser(
+        prog="hierloco-robot-check",
+        description="Check a robot description and search the expert controller's parameters for experts that walk "
+                    "as commanded and a gait policy that reproduces them (docs/robots.md).")
+    parser.add_argument("robot", help="path/to/robot.yaml (or a registered robot name)")
+    parser.add_argument("--budget", type=float, default=300.0, help="s of search and verification (default 300): "
+                        "no stage or verification starts after it; the one running finishes")
+    parser.add_argument("--experts", type=int, default=30, help="experts in the verified library (default 30, the "
+                        "small preset's)")
+    parser.add_argument("--settle-time", type=float, default=3.0, help="s each verified expert walks before it is "
+                        "recorded (default 3)")
+    parser.add_argument("--epochs", type=int, default=150, help="gait-policy epochs (default 150, the small preset's)")
+    parser.add_argument("--hidden", type=int, default=512, help="gait-policy hidden units (default 512)")
+    parser.add_argument("--latent-dim", type=int, default=3, help="latent dimension (default 3)")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--description-only", action="store_true", help="check the description and stop")
+    parser.add_argument("--no-verify", action="store_true", help="screen only: no expert library nor gait policy")
+    args = parser.parse_args(argv)
+
+    def fail(message: str) -> int:
+        print(f"error: {' '.join(str(message).split())}", file=sys.stderr)
+        return EXIT_NOT_FOUND
+
+    for name in ("budget", "settle_time"):
+        if not (math.isfinite(getattr(args, name)) and getattr(args, name) > 0):
+            return fail(f"--{name.replace('_', '-')} must be a positive number of s, got {getattr(args, name)}")
+    for name in ("experts", "epochs", "hidden"):
+        if getattr(args, name) < 1:
+            return fail(f"--{name} must be a positive whole number, got {getattr(args, name)}")
+    from hierloco.envs.robots import get_robot
+
+    start = time.perf_counter()
+    try:
+        robot = get_robot(args.robot)
+        problems = description_problems(robot)
+    except (ValueError, OSError) as error:
+        return fail(error)
+    where = robot.reference
+    print(f"robot {robot.name} ({where}): {len(robot.legs)} legs, gait groups "
+          f"{[list(g) for g in robot.gait_groups]}; now gait_period {robot.gait_period:g} s, standing_height "
+          f"{robot.standing_height:.3f} m, swing_height {robot.swing_height:g} m")
+    elapsed = time.perf_counter() - start
+    if problems:
+        print(f"description: {len(problems)} problem{'s' if len(problems) > 1 else ''} ({elapsed:.2f} s):")
+        for line in problems:
+            print(f"  - {line}")
+        return EXIT_NOT_FOUND
+    print(f"description: ok ({elapsed:.2f} s): {description_summary(robot)}")
+    if args.description_only:
+        return EXIT_FOUND
+    from hierloco.components.expert_tuning import tune_expert_parameters
+
+    print(f"search (budget {args.budget:g} s):", flush=True)
+    result = tune_expert_parameters(
+        robot, budget_seconds=args.budget, num_experts=args.experts, settle_time=args.settle_time,
+        policy={"epochs": args.epochs, "hidden": args.hidden, "latent_dim": args.latent_dim},
+        verify=not args.no_verify, seed=args.seed, log=lambda line: print(line, flush=True))
+    params = result.params
+    if params is None:
+        print(f"not found in {result.seconds:.0f} s:")
+        for line in result.limits:
+            print(f"  - {line}")
+        return EXIT_NOT_FOUND
+    verified = result.verified
+    shown = result.verifications[-1] if result.verifications else None
+    if shown is not None and shown.report is not None:
+        print(f"\ntracking of the {shown.report.num_experts} experts verified ({shown.candidate.label}):")
+        print("\n".join(tracking_table(shown.report.axes)))
+        if shown.replayed_fraction is not None:
+            print(f"experts' own targets replayed open loop: {shown.replayed_fraction:.0%} within 0.05 m/s")
+        if shown.reproduced_fraction is not None:
+            print(f"gait policy: reproduces {shown.reproduced_fraction:.0%} of the experts within 0.05 m/s in "
+                  f"simulation (need {result.min_reproduced_fraction:.0%})")
+    elif result.best is not None and result.best.axes:
+        print(f"\ntracking of the {result.best.num_commands} screened experts ({result.best.candidate.label}):")
+        print("\n".join(tracking_table(result.best.axes)))
+        print(f"experts' own targets replayed open loop: {result.best.replayed_fraction:.0%} within 0.05 m/s")
+    changed = params.changed(result.reference)
+    lines = params.yaml_lines(robot, only=changed)
+    if result.found:
+        what = "verified" if verified is not None else "screened only (--no-verify)"
+        same = "" if changed else "; the description's own parameters walk, these lines pin the derived values"
+        print(f"\nfound in {result.seconds:.0f} s ({what}{same}); paste into {where} (replacing these keys):")
+        print("\n".join(lines))
+        adapted = verified.policy_adapted if verified is not None else None
+        if adapted is not None:
+            overrides = " ".join(f"policy.{key}={value:g}" for key, value in adapted["overrides"].items())
+            print(f"# and train the gait policy with the recipe overrides {overrides} (the configured "
+                  f"{args.epochs} epochs of {args.hidden} units reproduce "
+                  f"{verified.policy_attempts[0]['reproduced_fraction']:.0%} of the experts, this fit "
+                  f"{adapted['reproduced_fraction']:.0%})")
+        return EXIT_FOUND
+    print(f"\nnot found in {result.seconds:.0f} s; the best candidate: {result.best.candidate.label}")
+    print("what limits it:")
+    for line in result.limits:
+        print(f"  - {line}")
+    print("its parameters:")
+    print("\n".join(lines))
+    return EXIT_NOT_FOUND
+
+
+__all__ = ["main", "tracking_table"]
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
