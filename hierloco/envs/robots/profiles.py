@@ -2,9 +2,9 @@
 
 - ``own``: the robot as described (A1: 100 N m/rad servos limited to 33.5 N m, feet of friction 0.8 on a floor of
   1.0, so contacts of 1.0; Daisy: its own gains and HEBI torque limits).
-- ``stiff``: close to the position control with effectively unlimited force and low friction of the PyBullet robots
-  the paper used (Li et al., Sec. IV-C): servo gains and torque limits three times the robot's, and a contact
-  friction of 0.4.
+- ``stiff``: servos stiffer and stronger than the robot's own and more slippery contacts: servo gains and torque
+  limits three times the robot's, and a contact friction of 0.4 (the paper's robots are simulated in PyBullet,
+  Li et al., Sec. IV-A, whose servo and contact settings it does not give).
 - ``stiff_servos``: the servos of ``stiff`` with the robot's own contacts, to tell the two changes apart.
 
 Example:
