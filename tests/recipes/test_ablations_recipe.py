@@ -6,11 +6,14 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from hierloco.results import read_csv
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
+@pytest.mark.slow  # a study through Ray (~50 s)
 def test_ablation_tiny(tmp_path):
     out, runs = tmp_path / "ablations", tmp_path / "runs"
     command = [sys.executable, str(ROOT / "recipes" / "ablations" / "run.py"), "preset=tiny", "robot=a1", "trials=1",

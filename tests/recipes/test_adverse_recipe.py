@@ -10,11 +10,14 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from hierloco.results import read_csv
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
+@pytest.mark.slow  # a study through Ray (~85 s)
 def test_adverse_tiny(tmp_path):
     out = tmp_path / "adverse"
     command = [sys.executable, str(ROOT / "recipes" / "adverse" / "run.py"), "preset=tiny", "robots=[a1]", "seeds=[0]",

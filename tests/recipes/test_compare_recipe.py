@@ -22,6 +22,7 @@ def compare(cwd, *overrides):
     return subprocess.run(command, cwd=cwd, env=env, capture_output=True, text=True, timeout=1200)
 
 
+@pytest.mark.slow  # a study of 8 jobs through Ray (~170 s); the default suite's reliability tests cover reuse (case 1)
 def test_compare_through_ray_equals_the_jobs_one_by_one(tmp_path):
     by_ray = tmp_path / "ray"
     by_ray.mkdir()

@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from hierloco.components.dynamics_data import TransitionData
 from hierloco.results import read_csv
@@ -15,6 +16,7 @@ from hierloco.results import read_csv
 ROOT = Path(__file__).resolve().parents[2]
 
 
+@pytest.mark.slow  # a study through Ray (~30 s)
 def test_hardware_tiny(tmp_path):
     out = tmp_path / "out"
     command = [sys.executable, str(ROOT / "recipes" / "hardware" / "run.py"), "preset=tiny", "robots=[a1]",

@@ -6,9 +6,12 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[2]
 
 
+@pytest.mark.slow  # a study through Ray (~40 s)
 def test_navigation_tiny(tmp_path):
     out = tmp_path / "nav"
     command = [sys.executable, str(ROOT / "recipes" / "navigation" / "run.py"), "lat_preset=tiny", "progress=false",

@@ -6,6 +6,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from hierloco.results import read_csv
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -43,6 +45,7 @@ def test_tune_ik_tiny(tmp_path):
     assert "Best: a1: " in table
 
 
+@pytest.mark.slow  # a SAC tuning study (~40 s); test_tune_ik_tiny keeps the tuning recipe in the default suite
 def test_tune_sac_tiny_reuses_the_comparison_agents_for_the_paper_candidate(tmp_path):
     env = {**os.environ, "WANDB_MODE": "offline"}
     source = finished_run(tmp_path, "sac", env)  # the comparison's SAC run
