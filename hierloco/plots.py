@@ -205,8 +205,8 @@ def plot_ablations(results: dict, path: str | os.PathLike, *, title: str | None 
 
 
 def plot_samples(rows: Sequence[dict], path: str | os.PathLike, *, tasks: Sequence[str] = ("velocity_tracking",
-                 "goal_reaching"), title: str | None = None) -> None:
-    """Normalised cost (mean +- std over targets and seeds) against the number of dynamics samples, one line per
+                 "goal_reaching"), title: str | None = None, xlabel: str = "dynamics samples after damage") -> None:
+    """Normalised cost (mean +- std over targets and seeds) against a number of samples (log scale), one line per
     method and task, one panel per robot, from per-episode rows that carry a ``samples`` column."""
     robots = sorted({r["robot"] for r in rows})
     if not robots:
@@ -225,7 +225,7 @@ def plot_samples(rows: Sequence[dict], path: str | os.PathLike, *, tasks: Sequen
                 ax.errorbar(points, [np.mean(v) for v in values], yerr=[np.std(v) for v in values], fmt=style,
                             capsize=3, label=f"{method.upper()} {task.replace('_', ' ')}")
         ax.set_xscale("log")
-        ax.set_xlabel("dynamics samples after damage")
+        ax.set_xlabel(xlabel)
         ax.set_ylabel("normalised cost (lower is better)")
         ax.axhline(1.0, color="k", lw=0.8, ls=":")
         ax.set_title(robot)

@@ -60,6 +60,8 @@ class Job:
     reuse_from: str | None = None  # another run directory whose finished stages this job starts from (their keys
     reuse_stages: tuple = ()       # equal to this job's own): those named here, or every one when it names none
     device: str | None = None  # where its networks run (device=...; None: the recipe's default); not in its signature
+    records_from: str | None = None  # another study's records directory its record may be taken from (read only:
+    #                                  e.g. the comparison's full-budget runs in the sample-efficiency study)
 
     def command(self) -> list[str]:
         return [sys.executable, str(METHODS[self.method].train_script), f"run_dir={self.run_dir}",
@@ -356,6 +358,15 @@ def check_records(records) -> None:
     job_records.check_records(records)
 
 
+def _from_records(job: Job, records: str | None, specs) -> tuple[Path, dict] | None:
+    """The job's current record and where it lies: under the study's ``records``, else under the directory
+    ``job.records_from`` names (read only), else ``None``."""
+    for root in (records, job.records_from):
+        if root and (record := recorded(job, root, specs)) is not None:
+            return job_records.record_dir(root, job.run_dir), record
+    return None
+
+
 def _keep_record(records: str | None, job: Job, record: dict | None) -> None:
     if records and record:
         job_records.save(record, job_records.record_dir(records, job.run_dir))
@@ -509,13 +520,15 @@ def run_jobs(jobs: Sequence[Job], *, address: str | None = None, cores_per_job: 
     import ray
 
     check_records(records)
+    for root in dict.fromkeys(job.records_from for job in jobs if job.records_from):
+        check_records(root)
     gpus_per_job = check_gpus_per_job(gpus_per_job, jobs)
     address = address or os.environ.get("RAY_ADDRESS")
     if address and not dry_run:
         check_ray_address(address)
     results: dict[int, JobResult] = {}
     todo = []
-    from_records = 0
+    from_records, borrowed = 0, {}  # taken from records: all, and those from another study's (by directory)
     for index, job in enumerate(jobs):
         if not address:  # local workers share this file system: give them absolute paths
             job.run_dir = str(Path(job.run_dir).resolve())
@@ -535,9 +548,11 @@ def run_jobs(jobs: Sequence[Job], *, address: str | None = None, cores_per_job: 
                                        builds=record["builds"], recorded_seconds=_seconds(record))
             if not dry_run:
                 _keep_record(records, job, record)
-        elif records and specs is not None and not (Path(job.run_dir) / DONE).exists() and (
-                recorded_job := recorded(job, records, specs)) is not None:
-            source = job_records.record_dir(records, job.run_dir)
+        elif specs is not None and not (Path(job.run_dir) / DONE).exists() and (
+                taken := _from_records(job, records, specs)) is not None:
+            source, recorded_job = taken
+            if records is None or not source.is_relative_to(Path(records)):
+                borrowed[job.records_from] = borrowed.get(job.records_from, 0) + 1
             results[index] = JobResult(job, True, recorded_job["rows"], 0.0, reused=True, source=str(source),
                                        report=recorded_job["report"], builds=recorded_job["builds"],
                                        recorded_seconds=_seconds(recorded_job))
@@ -556,7 +571,9 @@ def run_jobs(jobs: Sequence[Job], *, address: str | None = None, cores_per_job: 
         raise SystemExit(0)
     findings = sum(r.finding for r in results.values())
     line = (f"study: {len(jobs)} jobs, {len(jobs) - len(todo) - from_records - findings} reused from their run "
-            "directories" + (f", {from_records} from their records in {records}" if records else ""))
+            "directories" + (f", {from_records - sum(borrowed.values())} from their records in {records}" if records
+                             else "")
+            + "".join(f", {n} from the records in {root}" for root, n in borrowed.items()))
     print(line + (f", {findings} not evaluable (an earlier run's finding)" if findings else ""), flush=True)
     if todo:
         started_here = not ray.is_initialized()

@@ -83,13 +83,21 @@ def jobs(cfg, robots) -> list:
                 continue
             recipe, variant = studies.resolve_method(method, cfg.variants)
             for seed in seeds_of(cfg, method):
-                run_dir = Path("outputs") / method / cfg.preset_name / f"{spec.name}_seed{seed}"
-                overrides = [f"preset={cfg.preset_name}", f"robot={spec.reference}", f"seed={seed}",
-                             f"settings=[{','.join(settings)}]", "progress=false", *generalization, *variant,
-                             *cfg.overrides,
-                             *cfg.method_overrides.get(method, [])]
-                planned.append(studies.Job(recipe, str(run_dir), overrides, labels={"method": method}))
+                planned.append(comparison_job(method, spec, seed, preset=cfg.preset_name, settings=settings,
+                                              recipe=recipe, overrides=[*generalization, *variant, *cfg.overrides,
+                                                                        *cfg.method_overrides.get(method, [])]))
     return planned
+
+
+def comparison_job(method: str, spec, seed: int, *, preset: str, settings, recipe: str | None = None,
+                   overrides=("eval.generalization=null",)) -> studies.Job:
+    """The comparison's job of ``method`` on the robot ``spec`` (a :class:`hierloco.envs.robots.spec.RobotSpec`) with
+    ``seed``: its run directory ``outputs/<method>/<preset>/<robot>_seed<seed>`` and its overrides, so other studies
+    (the sample-efficiency study's full budgets) name the same job and take its run or record."""
+    run_dir = Path("outputs") / method / preset / f"{spec.name}_seed{seed}"
+    return studies.Job(recipe or method, str(run_dir),
+                       [f"preset={preset}", f"robot={spec.reference}", f"seed={seed}",
+                        f"settings=[{','.join(settings)}]", "progress=false", *overrides], labels={"method": method})
 
 
 @study_main(__file__)
