@@ -49,10 +49,12 @@ def _mlp(inputs: int, outputs: int, hidden: int) -> nn.Sequential:
                          nn.Linear(hidden, outputs))
 
 
-def reference_update(hidden: int, batch: TensorDict):
-    """The plain update of the same three networks: forward, MSE, backward, fused Adam step."""
+def reference_update(hidden: int, batch: TensorDict, device: str | torch.device = "cpu"):
+    """The plain update of the same three networks on ``device`` (where ``batch`` is): forward, MSE, backward, fused
+    Adam step (the reference of a SAC update here and in ``benchmarks/gpu.py``)."""
     nets = nn.ModuleList([_mlp(OBSERVATION_DIM, 2 * ACTION_DIM, hidden),
-                          _mlp(OBSERVATION_DIM + ACTION_DIM, 1, hidden), _mlp(OBSERVATION_DIM + ACTION_DIM, 1, hidden)])
+                          _mlp(OBSERVATION_DIM + ACTION_DIM, 1, hidden),
+                          _mlp(OBSERVATION_DIM + ACTION_DIM, 1, hidden)]).to(device)
     optimizer = torch.optim.Adam(nets.parameters(), lr=1e-3, fused=True)
     obs, action, target = batch["observation"], batch["action"], batch["next", "reward"]
     obs_action = torch.cat([obs, action], -1)

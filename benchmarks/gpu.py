@@ -48,8 +48,6 @@ sys.path.insert(0, str(ROOT))
 
 from hierloco.devices import is_cuda, synchronize  # noqa: E402
 
-OBSERVATION_DIM, ACTION_DIM = 48, 12
-
 
 def parse_args(argv=None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -137,48 +135,13 @@ def mpc_section(device, repeats: int, small: bool) -> str:
 
 
 # ---------------------------------------------------------------------------------------------------- SAC update
-def sac_batch(size: int, device) -> "TensorDict":  # noqa: F821
-    from tensordict import TensorDict
-
-    generator = torch.Generator().manual_seed(0)
-    done = torch.zeros(size, 1, dtype=torch.bool, device="cpu")
-    return TensorDict({"observation": torch.randn(size, OBSERVATION_DIM, generator=generator, device="cpu"),
-                       "action": torch.rand(size, ACTION_DIM, generator=generator, device="cpu") * 2 - 1,
-                       "next": {"observation": torch.randn(size, OBSERVATION_DIM, generator=generator, device="cpu"),
-                                "reward": torch.randn(size, 1, generator=generator, device="cpu"), "done": done,
-                                "terminated": done.clone()}}, batch_size=[size]).to(device)
-
-
-def plain_update(hidden: int, batch, device):
-    """Forward of the same three networks, MSE, backward, fused Adam: the reference of a SAC update."""
-    from torch import nn
-
-    def mlp(inputs, outputs):
-        return nn.Sequential(nn.Linear(inputs, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU(),
-                             nn.Linear(hidden, outputs))
-
-    nets = nn.ModuleList([mlp(OBSERVATION_DIM, 2 * ACTION_DIM), mlp(OBSERVATION_DIM + ACTION_DIM, 1),
-                          mlp(OBSERVATION_DIM + ACTION_DIM, 1)]).to(device)
-    optimizer = torch.optim.Adam(nets.parameters(), lr=1e-3, fused=True)
-    obs, target = batch["observation"], batch["next", "reward"]
-    obs_action = torch.cat([obs, batch["action"]], -1)
-
-    def update():
-        loss = (nets[0](obs).pow(2).mean() + (nets[1](obs_action) - target).pow(2).mean()
-                + (nets[2](obs_action) - target).pow(2).mean())
-        optimizer.zero_grad(set_to_none=True)
-        loss.backward()
-        optimizer.step()
-
-    return update
-
-
 def sac_update_section(device, repeats: int, small: bool) -> str:
+    from benchmarks.bench_sac import ACTION_DIM, OBSERVATION_DIM, _batch, reference_update
     from hierloco.components.sac import SACAgent
 
     hidden, size = (64, 64) if small else (512, 512)
-    batch = sac_batch(size, device)
-    reference = median_ms(plain_update(hidden, batch, device), device, repeats)
+    batch = _batch(size, torch.Generator().manual_seed(0)).to(device)
+    reference = median_ms(reference_update(hidden, batch, device), device, repeats)
     rows = []
     modes = [("eager", False), ("compiled", "default"),
              ("graphed", "reduce-overhead" if is_cuda(device) else None)]
