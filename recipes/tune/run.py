@@ -11,7 +11,13 @@ starts from the finished stages ``reuse_stages`` (the candidate's own, else the 
 ``outputs/<reuse>/<preset>/<robot>_seed<seed>`` (their keys are checked like any cached stage).
 What is tuned is a ``target`` (``target/<name>.yaml``): ``ik`` (default) or ``sac`` (the paper's optimiser against a
 lower learning rate). Writes ``tune.csv``, ``tune.md`` (per robot and candidate: the training-split cost
-of every task and their mean, the best candidate marked) and ``wallclock.md`` in ``out_dir``.
+of every task and their mean, the candidate chosen) and ``wallclock.md`` in ``out_dir``.
+
+**The rule** (:func:`choose`): the target's ``incumbent`` (the setting the comparison runs: the paper's optimiser for
+SAC, our integral footstep law for IK) is kept unless another candidate is *better* on the training targets by the
+test over seeds of ``docs/statistics.md`` (each seed's mean training cost over the tasks; Welch's interval, alpha
+0.05, at least 10 % and 0.01 lower); of several that are, the lowest mean. A lower mean that the test does not
+establish (one seed, or a difference within the seeds' spread) changes nothing.
 """
 
 import hierloco  # noqa: F401  (first: the rendering backend is chosen before anything loads MuJoCo)
@@ -40,6 +46,9 @@ def check(cfg) -> list:
         unknown = set(candidate) - {"overrides", "reuse", "reuse_stages"}
         if unknown:
             problems.append(f"candidate {name!r}: unknown keys {sorted(unknown)} (overrides, reuse, reuse_stages)")
+    if cfg.candidates and cfg.get("incumbent") not in cfg.candidates:
+        problems.append(f"incumbent {cfg.get('incumbent')!r} is not a candidate ({', '.join(cfg.candidates)}): the "
+                        "setting kept unless another is better")
     robots = study_robots(cfg.robots, problems)
     problems += seed_problems(cfg.seeds)
     if not cfg.tasks:
@@ -69,26 +78,45 @@ def jobs(cfg, robots) -> list:
     return planned
 
 
-def tune_table(rows: list[dict], tasks) -> tuple[str, dict]:
-    """Per robot and candidate, the mean normalised cost on each task's training split (mean over seeds of each
-    seed's mean over targets, :func:`recipes.compare.paper_check.seed_means`) and their mean; returns the Markdown table and the best candidate per robot."""
+def training_costs(rows: list[dict], tasks, robot: str, candidate: str) -> tuple[np.ndarray, list]:
+    """A candidate's per-seed training cost (``S``: each seed's mean over ``tasks`` of its mean over the task's
+    training targets, :func:`recipes.compare.paper_check.seed_means`) and each task's ``(mean, std)`` over seeds."""
+    of = [{**r, "method": r["candidate"]} for r in rows if r["candidate"] == candidate]
+    per_task = [seed_means(of, method=candidate, robot=robot, setting="normal", task=f"{task}_train") for task in tasks]
+    if any(costs.size == 0 for costs in per_task) or len({costs.size for costs in per_task}) > 1:
+        return np.array([]), [(float(c.mean()), float(c.std())) if c.size else (np.nan, np.nan) for c in per_task]
+    return np.mean(per_task, axis=0), [(float(c.mean()), float(c.std())) for c in per_task]
+
+
+def choose(per_seed: dict[str, np.ndarray], incumbent: str) -> tuple[str, dict]:
+    """The rule (module docstring): the candidate chosen, and each other candidate's decision against the
+    incumbent (:func:`hierloco.stats.decide_better`)."""
+    from hierloco.stats import decide_better
+
+    decisions = {name: decide_better(costs, per_seed[incumbent]) for name, costs in per_seed.items()
+                 if name != incumbent and costs.size and per_seed.get(incumbent, np.array([])).size}
+    better = [name for name, decision in decisions.items() if decision.verdict == "holds"]
+    return (min(better, key=lambda name: per_seed[name].mean()) if better else incumbent), decisions
+
+
+def tune_table(rows: list[dict], tasks, incumbent: str) -> tuple[str, dict]:
+    """Per robot and candidate, the mean normalised cost on each task's training split (mean +- std over seeds) and
+    their mean, with each candidate's test against the incumbent; returns the Markdown table and the candidate the
+    rule chooses per robot (:func:`choose`)."""
     header = " | ".join(f"{t} (train)" for t in tasks)
-    lines = [f"| robot | candidate | {header} | mean | best |", "|---|---|" + "---|" * len(tasks) + "---|---|"]
-    best = {}
+    lines = [f"| robot | candidate | {header} | mean | better than {incumbent}? | chosen |",
+             "|---|---|" + "---|" * len(tasks) + "---|---|---|"]
+    chosen = {}
     for robot in sorted({r["robot"] for r in rows}):
-        scores = {}
-        for candidate in dict.fromkeys(r["candidate"] for r in rows):
-            costs = []
-            of = [{**r, "method": r["candidate"]} for r in rows if r["candidate"] == candidate]
-            for task in tasks:
-                per_seed = seed_means(of, method=candidate, robot=robot, setting="normal", task=f"{task}_train")
-                costs.append((float(per_seed.mean()), float(per_seed.std())) if per_seed.size else (np.nan, np.nan))
-            scores[candidate] = (float(np.mean([c[0] for c in costs])), costs)
-        best[robot] = min(scores, key=lambda c: scores[c][0])
-        for candidate, (mean, costs) in scores.items():
-            cells = " | ".join(f"{m:.2f} +- {s:.2f}" for m, s in costs)
-            lines.append(f"| {robot} | {candidate} | {cells} | {mean:.3f} | {'best' if candidate == best[robot] else ''} |")
-    return "\n".join(lines) + "\n", best
+        candidates = list(dict.fromkeys(r["candidate"] for r in rows if r["robot"] == robot))
+        costs = {name: training_costs(rows, tasks, robot, name) for name in candidates}
+        chosen[robot], decisions = choose({name: per_seed for name, (per_seed, _) in costs.items()}, incumbent)
+        for name, (per_seed, per_task) in costs.items():
+            cells = " | ".join(f"{m:.2f} +- {s:.2f}" for m, s in per_task)
+            mean = f"{per_seed.mean():.3f}" if per_seed.size else "-"
+            test = "(incumbent)" if name == incumbent else (decisions[name].text() if name in decisions else "-")
+            lines.append(f"| {robot} | {name} | {cells} | {mean} | {test} | {'chosen' if name == chosen[robot] else ''} |")
+    return "\n".join(lines) + "\n", chosen
 
 
 @study_main(__file__)
@@ -100,15 +128,18 @@ def main(cfg) -> None:
     rows = studies.rows_of(results)
     out = Path(cfg.out_dir)
     if rows:
-        table, best = tune_table(rows, list(cfg.tasks))
+        table, picked = tune_table(rows, list(cfg.tasks), cfg.incumbent)
         write_text(out / "tune.csv", csv_text(rows, EPISODE_COLUMNS + ["candidate"]))
-        chosen = "; ".join(f"{robot}: {name}" for robot, name in best.items())
+        chosen = "; ".join(f"{robot}: {name}" for robot, name in picked.items())
         write_text(out / "tune.md", f"# Tuning {cfg.method.upper()} on the training targets ({cfg.preset_name} "
                                     f"preset, seeds {list(cfg.seeds)})\n\nNormalised cost on each task's training "
-                                    f"split, mean +- std over seeds; the best candidate has the lowest mean.\n\n"
-                                    f"{table}\nBest: {chosen}.\n" + missing_markdown(results))
+                                    f"split, mean +- std over seeds. The rule: `{cfg.incumbent}` is kept unless "
+                                    "another candidate is better by the test over seeds (each seed's mean over the "
+                                    "tasks; Welch's interval, alpha 0.05, at least 10 % and 0.01 lower; "
+                                    f"docs/statistics.md); of several, the lowest mean.\n\n"
+                                    f"{table}\nChosen: {chosen}.\n" + missing_markdown(results))
         write_text(out / "wallclock.md", wallclock_markdown(results))
-        print("\n" + table + f"\nbest: {chosen}")
+        print("\n" + table + f"\nchosen: {chosen}")
     print(f"tuning table in {out}/")
     end_study(results)
 
