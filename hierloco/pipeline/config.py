@@ -186,6 +186,18 @@ def check_experts(c: Checker, robot, *, library: bool = True) -> None:
             c.fail(f"experts.tune must be true or false, got {get(c.cfg, 'experts.tune')!r}")
         if get(c.cfg, "experts.tune_budget") is not None:
             c.positive("experts.tune_budget")
+        gaits = get(c.cfg, "experts.gaits")
+        if gaits is not None:
+            if not isinstance(gaits, DictConfig):
+                c.fail(f"experts.gaits must map gait names to gait groups (e.g. {{trot: [[FR, RL], [FL, RR]], pace: "
+                       f"[[FR, RR], [FL, RL]]}}), got {gaits!r}")
+            elif robot is not None:
+                from hierloco.components.gaits import check_gaits
+
+                for problem in check_gaits(robot, OmegaConf.to_container(gaits, resolve=True)):
+                    c.fail(f"experts.gaits: {problem}")
+            if get(c.cfg, "experts.tune", False):
+                c.fail("experts.tune searches the robot's own gait's parameters: it does not combine with experts.gaits")
         box = {k: get(c.cfg, f"experts.{k}") for k in ("command_low", "command_high")}
         if robot is not None and any(v is not None for v in box.values()):
             from hierloco.components.expert_library import command_box

@@ -52,7 +52,7 @@ class GaitPolicyQualityError(Finding, ValueError):
 
 # ---------------------------------------------------------------------------------------------------- experts
 # Options added after runs were recorded, keyed only when they differ from these defaults (docs/pipeline.md).
-EXPERTS_DEFAULTS = {"tune": False, "tune_budget": 300.0}
+EXPERTS_DEFAULTS = {"tune": False, "tune_budget": 300.0, "gaits": None}
 POLICY_DEFAULTS = {"adaptive": False, "budget_epochs": None}
 
 
@@ -70,12 +70,16 @@ def build_experts(run, params) -> ExpertLibrary:
     """The expert library, checked to walk as commanded (Li et al., Sec. III-A)."""
     from hierloco.components.expert_library import build_expert_library
 
+    options = {"steps_per_action": params["steps_per_action"], "seed": params["seed"],
+               "settle_time": params["settle_time"], "command_low": params.get("command_low"),
+               "command_high": params.get("command_high"), "progress": run.progress}
     with warnings.catch_warnings():  # check_experts raises with the same diagnosis, in one line
         warnings.filterwarnings("ignore", message=".*do not walk as commanded", category=RuntimeWarning)
-        return build_expert_library(run.robot, params["num_experts"], steps_per_action=params["steps_per_action"],
-                                    seed=params["seed"], settle_time=params["settle_time"],
-                                    command_low=params.get("command_low"), command_high=params.get("command_high"),
-                                    progress=run.progress)
+        if params.get("gaits"):  # experts over several gaits, one gait policy over all (hierloco.components.gaits)
+            from hierloco.components.gaits import build_gait_library
+
+            return build_gait_library(run.robot, params["gaits"], params["num_experts"], **options)
+        return build_expert_library(run.robot, params["num_experts"], **options)
 
 
 def check_experts(run, library: ExpertLibrary) -> None:
