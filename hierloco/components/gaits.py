@@ -65,7 +65,9 @@ def build_gait_library(robot: str | RobotSpec, gaits: Mapping[str, GaitGroups], 
     build_expert_library` (``options``: its keyword arguments) with seed ``seed + index``. The library is the robot's
     own (its metadata names ``robot``, not the gait's copy) and adds ``gaits``, ``expert_gaits`` (one name per
     expert) and ``leg_names``."""
-    from hierloco.components.expert_library import ExpertLibrary, build_expert_library, diagnose_expert_library
+    from hierloco.components.expert_library import (
+        ExpertLibrary, ExpertQualityError, build_expert_library, diagnose_expert_library,
+    )
 
     robot = get_robot(robot)
     problems = check_gaits(robot, gaits)
@@ -75,8 +77,12 @@ def build_gait_library(robot: str | RobotSpec, gaits: Mapping[str, GaitGroups], 
     counts = [len(part) for part in np.array_split(np.arange(int(num_experts)), len(gaits))]
     if min(counts) < 1:
         raise ValueError(f"{num_experts} experts cannot be split between {len(gaits)} gaits")
-    parts = [build_expert_library(gait_robot(robot, groups), count, seed=seed + index, **options)
-             for index, ((name, groups), count) in enumerate(zip(gaits.items(), counts))]
+    parts = []
+    for index, ((name, groups), count) in enumerate(zip(gaits.items(), counts)):
+        try:
+            parts.append(build_expert_library(gait_robot(robot, groups), count, seed=seed + index, **options))
+        except ExpertQualityError as error:  # the same finding, saying which gait
+            raise ExpertQualityError(f"gait {name!r} ({count} experts): {error}") from None
     arrays = {field: np.concatenate([getattr(part, field) for part in parts])
               for field in ("commands", "joint_targets", "com_states", "foot_contacts", "velocity_local", "yaw_rate",
                             "displacement_local", "tracking_error")}

@@ -186,6 +186,9 @@ def check_experts(c: Checker, robot, *, library: bool = True) -> None:
             c.fail(f"experts.tune must be true or false, got {get(c.cfg, 'experts.tune')!r}")
         if get(c.cfg, "experts.tune_budget") is not None:
             c.positive("experts.tune_budget")
+        failed = get(c.cfg, "experts.max_failed_experts")
+        if failed is not None and not (_is_int(failed) and failed >= 0):
+            c.fail(f"experts.max_failed_experts must be an integer >= 0 or null, got {failed!r}")
         gaits = get(c.cfg, "experts.gaits")
         if gaits is not None:
             if not isinstance(gaits, DictConfig):

@@ -52,7 +52,7 @@ class GaitPolicyQualityError(Finding, ValueError):
 
 # ---------------------------------------------------------------------------------------------------- experts
 # Options added after runs were recorded, keyed only when they differ from these defaults (docs/pipeline.md).
-EXPERTS_DEFAULTS = {"tune": False, "tune_budget": 300.0, "gaits": None}
+EXPERTS_DEFAULTS = {"tune": False, "tune_budget": 300.0, "gaits": None, "max_failed_experts": None}
 POLICY_DEFAULTS = {"adaptive": False, "budget_epochs": None}
 
 
@@ -72,7 +72,8 @@ def build_experts(run, params) -> ExpertLibrary:
 
     options = {"steps_per_action": params["steps_per_action"], "seed": params["seed"],
                "settle_time": params["settle_time"], "command_low": params.get("command_low"),
-               "command_high": params.get("command_high"), "progress": run.progress}
+               "command_high": params.get("command_high"), "progress": run.progress,
+               "max_failed_experts": params.get("max_failed_experts")}
     with warnings.catch_warnings():  # check_experts raises with the same diagnosis, in one line
         warnings.filterwarnings("ignore", message=".*do not walk as commanded", category=RuntimeWarning)
         if params.get("gaits"):  # experts over several gaits, one gait policy over all (hierloco.components.gaits)
