@@ -115,6 +115,7 @@ def switches(sequence: list[str]) -> int:
 def gaits_markdown(labels: list[dict], rows: list[dict], gaits: dict, tasks, *, own: str, several: str,
                    title: str) -> str:
     from hierloco.stats import decide_close
+    from recipes.compare.paper_check import seed_means
 
     names = sorted(gaits)
     lines = [f"# Gait transitions ({title})", "",
@@ -134,20 +135,15 @@ def gaits_markdown(labels: list[dict], rows: list[dict], gaits: dict, tasks, *, 
                      f"{np.mean(per_episode) if per_episode else float('nan'):.2f} | "
                      f"{sum(s > 0 for s in per_episode)} of {len(per_episode)} |")
     lines += ["", "## Cost", "",
-              f"Mean normalised cost over seeds (each seed's mean over its episodes); the test: \"{several} cost as "
+              f"Mean normalised cost over seeds (each seed's mean over its episodes, a fall counting 1); the test: \"{several} cost as "
               f"little as {own}\" (close: within 20 % or 0.01, `docs/statistics.md`).", "",
               f"| task | {own} | {several} | verdict |", "|---|---|---|---|"]
+    robot = rows[0]["robot"] if rows else ""
     for task in tasks:
-        def per_seed(method):
-            by_seed: dict = {}
-            for r in rows:
-                if (r["method"], r["task"], r["setting"]) == (method, task, "normal"):
-                    by_seed.setdefault(r["seed"], []).append(float(r["normalized_cost"]))
-            return [float(np.mean(v)) for _, v in sorted(by_seed.items())]
-        a, b = per_seed(several), per_seed(own)
-        verdict = decide_close(a, b).text() if a and b else "not measured"
-        lines.append(f"| {task.replace('_', ' ')} | {np.mean(b) if b else float('nan'):.3f} | "
-                     f"{np.mean(a) if a else float('nan'):.3f} | {verdict} |")
+        a, b = (seed_means(rows, method=method, robot=robot, setting="normal", task=task) for method in (several, own))
+        verdict = decide_close(a, b).text() if a.size and b.size else "not measured"
+        lines.append(f"| {task.replace('_', ' ')} | {b.mean() if b.size else float('nan'):.3f} | "
+                     f"{a.mean() if a.size else float('nan'):.3f} | {verdict} |")
     return "\n".join(lines) + "\n"
 
 

@@ -94,15 +94,22 @@ def samples_in_all(method: str, samples: int, num_tasks: int) -> int:
 
 
 def seed_curves(rows: list[dict], tasks) -> list[dict]:
-    """One row per robot, method, task, budget and seed: the seed's mean normalised cost over its episodes."""
+    """One row per robot, method, task, budget and seed: the seed's mean normalised cost over its episodes
+    (:func:`recipes.compare.paper_check.seed_means`: a fallen robot's episode counts as 1)."""
+    from recipes.compare.paper_check import seed_means
+
     groups: dict = {}
     for row in rows:
         if row["setting"] == "normal" and row["task"] in tasks:
-            key = (row["robot"], row["method"], row["task"], int(row["samples"]), int(row["seed"]))
-            groups.setdefault(key, []).append(float(row["normalized_cost"]))
-    return [{"robot": robot, "method": method, "task": task, "samples_per_task": samples,
-             "samples_in_all": samples_in_all(method, samples, len(tasks)), "seed": seed, "cost": float(np.mean(costs))}
-            for (robot, method, task, samples, seed), costs in sorted(groups.items())]
+            groups.setdefault((row["robot"], row["method"], row["task"], int(row["samples"])), []).append(row)
+    curves = []
+    for (robot, method, task, samples), group in sorted(groups.items()):
+        seeds = sorted({row["seed"] for row in group})
+        costs = seed_means(group, method=method, robot=robot, setting="normal", task=task)
+        curves += [{"robot": robot, "method": method, "task": task, "samples_per_task": samples,
+                    "samples_in_all": samples_in_all(method, samples, len(tasks)), "seed": int(seed),
+                    "cost": float(cost)} for seed, cost in zip(seeds, costs)]
+    return curves
 
 
 def check_claims(curves: list[dict], full: int) -> list[dict]:
