@@ -182,8 +182,12 @@ def main(cfg) -> None:
     end_study(results)
 
 
+DIAGRAM_ACTIONS = 8  # latent actions a gait diagram shows
+
+
 def plot_diagrams(first, tasks, out: Path, count: int) -> None:
-    """Gait diagrams of the ``count`` episodes of the first seed with the most switches (ties: the first)."""
+    """Gait diagrams of the ``count`` episodes of the first seed with the most switches (ties: the first): the
+    :data:`DIAGRAM_ACTIONS` actions from two before its first switch."""
     from hierloco.io import load_arrays
     from hierloco.plots import plot_gait_diagram
 
@@ -195,9 +199,13 @@ def plot_diagrams(first, tasks, out: Path, count: int) -> None:
     for _, task, episode in ranked:
         arrays, _ = load_arrays(Path(job.run_dir) / specs[f"evaluation_normal_{task}"].filename)
         sequence = per_task[task][episode]
-        plot_gait_diagram(arrays["foot_contacts"][episode], legs, out / f"gait_{task}_episode{episode}.png",
-                          action_steps=steps, title=f"{task.replace('_', ' ')}, episode {episode}: "
-                                                    + " ".join(sequence))
+        first = next((a for a in range(1, len(sequence)) if sequence[a] != sequence[a - 1]), 0)
+        start = max(0, min(first - 2, len(sequence) - DIAGRAM_ACTIONS))  # a readable window around the first switch
+        window = sequence[start:start + DIAGRAM_ACTIONS]
+        contacts = arrays["foot_contacts"][episode][start * steps:(start + len(window)) * steps]
+        plot_gait_diagram(contacts, legs, out / f"gait_{task}_episode{episode}.png", action_steps=steps,
+                          title=f"{task.replace('_', ' ')}, episode {episode}, actions {start}-"
+                                f"{start + len(window) - 1}: " + " ".join(window))
 
 
 if __name__ == "__main__":
