@@ -444,14 +444,16 @@ NOT_MEASURED_YET = [
      "directions; no test over seeds yet)"),
     ("\"Our learned latent space can induce gait transitions in the low-level if needed by the task\", on both "
      "robots and hardware", "Sec. V; Fig. 9",
-     "a gait-transition study with records: stance/swing patterns per leg during MPC (the gait diagram), counted "
-     "over tasks, robots and seeds"),
+     "a gait-transition study over both robots and seeds (`gaits/`: A1 over trot, pace and bound, seeds 0 and 2: "
+     "the planner switches gait every 2 to 5 actions on every task and costs more than trot alone; Daisy not run, "
+     "seed 1's gait policy did not pass its check)"),
     ("\"Our method can directly be used with waypoint navigation methods to reach a desired goal\"",
      "Sec. I; Fig. 2", "a navigation study with records over several arenas and seeds (`navigation/`: one arena, "
      "seed 0, A1 and Daisy reach the goal within 0.03 m; no test over arenas and seeds yet)"),
     ("\"this model-based planner outperforms model-free approaches ... in sample-efficiency\"", "Sec. III-C",
      "a learning-curve study: SAC and SAC-SAC cost against the high-level samples they are given, at and below "
-     "LAT's 10,000, on both robots"),
+     "LAT's 10,000, on both robots (`recipes/sample_efficiency/run.py`, LAT against SAC: running, "
+     "`sample_efficiency/`)"),
     ("the same results on the real Daisy (Fig. 8, 10a)", "Sec. IV-D",
      "a real robot: the hardware studies here perturb a simulated copy (mass, motors, friction, latency, CoM "
      "noise), which is what they measure"),
