@@ -253,8 +253,7 @@ def build_expert_library(
     cmds, targets, states, contacts = (np.stack(x) for x in zip(*records))
     displacement, velocity, yaw_rate = action_motion(states, steps_per_action * CONTROL_TIMESTEP)
     metadata = {
-        "robot": robot.name, "robot_reference": robot.reference, "robot_source": robot.source,
-        "robot_fingerprint": robot_fingerprint(robot),
+        **robot_metadata(robot),
         "steps_per_action": int(steps_per_action), "gait_period": robot.gait_period,
         "seed": int(seed), "settle_time": settle_steps * CONTROL_TIMESTEP, "disabled_legs": list(disabled_legs),
         "joint_names": list(robot.joint_names), "rejected_commands": rejected,
@@ -268,6 +267,12 @@ def build_expert_library(
     if not report.ok:
         warnings.warn(str(report), RuntimeWarning, stacklevel=2)
     return library
+
+
+def robot_metadata(robot: RobotSpec) -> dict:
+    """The robot fields of an expert library's metadata: its name, reference, source and fingerprint."""
+    return {"robot": robot.name, "robot_reference": robot.reference, "robot_source": robot.source,
+            "robot_fingerprint": robot_fingerprint(robot)}
 
 
 def default_max_failed_experts(num_experts: int) -> int:

@@ -66,7 +66,7 @@ def build_gait_library(robot: str | RobotSpec, gaits: Mapping[str, GaitGroups], 
     own (its metadata names ``robot``, not the gait's copy) and adds ``gaits``, ``expert_gaits`` (one name per
     expert) and ``leg_names``."""
     from hierloco.components.expert_library import (
-        ExpertLibrary, ExpertQualityError, build_expert_library, diagnose_expert_library,
+        ExpertLibrary, ExpertQualityError, build_expert_library, diagnose_expert_library, robot_metadata,
     )
 
     robot = get_robot(robot)
@@ -87,7 +87,7 @@ def build_gait_library(robot: str | RobotSpec, gaits: Mapping[str, GaitGroups], 
               for field in ("commands", "joint_targets", "com_states", "foot_contacts", "velocity_local", "yaw_rate",
                             "displacement_local", "tracking_error")}
     periods = {name: part.metadata["gait_period"] for name, part in zip(gaits, parts)}
-    metadata = {**parts[0].metadata, **_robot_metadata(robot), "seed": int(seed),
+    metadata = {**parts[0].metadata, **robot_metadata(robot), "seed": int(seed),
                 "gait_period": next(iter(periods.values())) if len(set(periods.values())) == 1 else None,
                 "gait_periods": periods,
                 "rejected_commands": int(sum(part.metadata["rejected_commands"] for part in parts)),
@@ -97,14 +97,6 @@ def build_gait_library(robot: str | RobotSpec, gaits: Mapping[str, GaitGroups], 
     library = ExpertLibrary(**arrays, metadata=metadata)
     library.metadata["tracking"] = diagnose_expert_library(library, robot=robot).summary()
     return library
-
-
-def _robot_metadata(robot: RobotSpec) -> dict:
-    """The robot fields of an expert library's metadata (its name, reference, source and fingerprint)."""
-    from hierloco.envs.robots import robot_fingerprint
-
-    return {"robot": robot.name, "robot_reference": robot.reference, "robot_source": robot.source,
-            "robot_fingerprint": robot_fingerprint(robot)}
 
 
 def gait_scores(foot_contacts: np.ndarray, gaits: Mapping[str, GaitGroups], leg_names: Sequence[str]) -> dict:

@@ -88,13 +88,13 @@ def action_gaits(job, tasks, gaits: dict) -> dict[str, list[list[str]]]:
 
     directory = RunDirectory(job.run_dir, readonly=True)
     specs = {spec.name: spec for spec in studies.planned_stages(job)}
+    legs, steps = gait_context(job)
     found = {}
     for task in tasks:
         spec = specs[f"evaluation_normal_{task}"]
         if not directory.check(spec.name, spec.key, spec.filename):
             raise FileNotFoundError(f"{job.run_dir}: the evaluation {spec.filename} is not there")
-        arrays, metadata = load_arrays(directory.path / spec.filename)
-        legs, steps = gait_context(job)
+        arrays, _ = load_arrays(directory.path / spec.filename)
         found[task] = [classify_actions(contacts, steps, gaits, legs) for contacts in arrays["foot_contacts"]]
     return found
 
