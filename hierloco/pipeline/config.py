@@ -332,6 +332,24 @@ def check_logger(c: Checker) -> None:
     c.choice("logger.wandb_mode", ("offline", "online"), "wandb mode")
 
 
+def override_value(value) -> str:
+    """``value`` (nested dicts, lists, numbers, plain words) as a Hydra override's value, in the order given:
+    ``{trot: [[FR, RL], [FL, RR]]}``, ``[[0, 0.05], [0, 0.3]]``. What a study writes into its jobs' overrides.
+
+        >>> override_value({"speed": {"task": "velocity_tracking", "velocities": [[0, 0.05]], "rounds": 1}})
+        '{speed: {task: velocity_tracking, velocities: [[0, 0.05]], rounds: 1}}'
+    """
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{key}: {override_value(item)}" for key, item in value.items()) + "}"
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(override_value(item) for item in value) + "]"
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    return str(value)
+
+
 def compose_recipe(method: str, overrides: Iterable[str]) -> DictConfig:
     """``recipes/<method>/config.yaml`` with ``overrides``, composed as its ``train.py`` would compose it; callable
     inside another Hydra app (the study drivers): Hydra's global state is restored afterwards."""

@@ -24,9 +24,9 @@ from omegaconf import OmegaConf
 
 from hierloco.io import write_text
 from hierloco.pipeline import studies
-from hierloco.pipeline.config import ConfigError, as_lists
+from hierloco.pipeline.config import ConfigError, as_lists, override_value
 from hierloco.pipeline.study import (
-    end_study, main_tasks, run_study, seed_problems, study_main, study_robots, write_tables,
+    end_study, main_tasks, missing_markdown, run_study, seed_problems, study_main, study_robots, write_tables,
 )
 from recipes.compare.run import comparison_job
 
@@ -53,6 +53,7 @@ def check(cfg):
                             f"{[list(g) for g in robots[0].gait_groups]}")
     if not (isinstance(cfg.diagrams, int) and cfg.diagrams >= 0):
         problems.append(f"diagrams must be an integer >= 0, got {cfg.diagrams!r}")
+    problems += profile_problems(cfg)
     if problems:
         raise ConfigError("bad config: " + "; ".join(problems))
     return robots[0]
@@ -60,14 +61,45 @@ def check(cfg):
 
 def gaits_override(gaits: dict) -> str:
     """``experts.gaits={...}`` for the command line, gaits by name (the library does not depend on their order)."""
-    body = ", ".join(f"{name}: [{', '.join('[' + ', '.join(group) + ']' for group in groups)}]"
-                     for name, groups in sorted(gaits.items()))
-    return f"experts.gaits={{{body}}}"
+    return f"experts.gaits={override_value(dict(sorted(gaits.items())))}"
 
 
-def jobs(cfg, spec) -> list:
-    planned = []
+def profile_of(cfg) -> dict:
+    """The speed-profile tasks (name -> task options), empty when ``profile`` is null."""
+    return OmegaConf.to_container(cfg.profile, resolve=True) if cfg.get("profile") else {}
+
+
+def profile_problems(cfg) -> list[str]:
+    """One line per profile task that is not a velocity task of the registry (its targets are speeds the tables
+    group by), or that shares a main task's name; a bad ``own_runs``."""
+    from hierloco.pipeline.config import make_task_from_spec
+
+    problems = []
+    profile = cfg.get("profile")
+    if profile is not None and not OmegaConf.is_dict(profile):
+        return [f"profile must map task names to options, got {profile!r}"]
+    for name, options in profile_of(cfg).items():
+        try:
+            task = make_task_from_spec(name, options)
+        except (ConfigError, ValueError, KeyError) as error:
+            problems.append(f"profile task {name!r}: {' '.join(str(error).split()).removeprefix('bad config: ')}")
+            continue
+        if not task.target_is_velocity:
+            problems.append(f"profile task {name!r} is a {task.kind} task; a speed profile needs velocity targets")
+    own_runs = cfg.get("own_runs")
+    if own_runs is not None and not (isinstance(own_runs, str) and "{seed}" in own_runs):
+        problems.append(f"own_runs must be a path holding {{seed}} (and optionally {{robot}}), got {own_runs!r}")
+    return problems
+
+
+def jobs(cfg, spec) -> tuple[list, list]:
+    """The study's jobs, and its speed-profile jobs (none when ``profile`` is null). Per seed: the own gait's
+    comparison job, the several-gait job; then each evaluated on the profile alone, starting from its trained stages
+    (the several-gait job's run directory; for the own gait, ``own_runs`` when set, else the comparison's run
+    directory), so a profile job trains nothing its source holds."""
+    planned, profiled = [], []
     label = f"{len(gaits_of(cfg))} gaits"
+    profile = profile_of(cfg)
     for seed in cfg.seeds:
         own = comparison_job("lat", spec, seed, preset=cfg.preset_name, settings=["normal", "legs_disabled"])
         own.labels, own.records_from = {"method": f"own gait ({cfg.own})"}, cfg.compare_records
@@ -76,27 +108,41 @@ def jobs(cfg, spec) -> list:
                                "settings=[normal]", "progress=false", *cfg.overrides, gaits_override(gaits_of(cfg))],
                               labels={"method": label})
         planned += [own, several]
-    return planned
+        if not profile:
+            continue
+        on_profile = ["~eval.tasks", f"+eval.tasks={override_value(profile)}", "eval.generalization=null",
+                      "eval.videos=[]"]
+        own_source = (cfg.own_runs.format(robot=spec.name, seed=seed) if cfg.get("own_runs") else own.run_dir)
+        own_normal = comparison_job("lat", spec, seed, preset=cfg.preset_name, settings=["normal"])
+        profiled += [
+            studies.Job("lat", str(Path(cfg.runs_dir) / f"{spec.name}_seed{seed}_own_profile"),
+                        [*own_normal.overrides, *on_profile], labels=dict(own.labels), reuse_from=own_source),
+            studies.Job("lat", str(Path(cfg.runs_dir) / f"{spec.name}_seed{seed}_profile"),
+                        [*several.overrides, *on_profile], labels=dict(several.labels), reuse_from=several.run_dir)]
+    return planned, profiled
+
+
+def evaluation_arrays(job, task: str) -> dict:
+    """The arrays of the job's evaluation of ``task`` in the normal setting: the artifact its plan names, checked
+    against its key first."""
+    from hierloco.io import load_arrays
+    from hierloco.pipeline.rundir import RunDirectory
+
+    directory = RunDirectory(job.run_dir, readonly=True)
+    spec = {spec.name: spec for spec in studies.planned_stages(job)}[f"evaluation_normal_{task}"]
+    if not directory.check(spec.name, spec.key, spec.filename):
+        raise FileNotFoundError(f"{job.run_dir}: the evaluation {spec.filename} is not there")
+    return load_arrays(directory.path / spec.filename)[0]
 
 
 def action_gaits(job, tasks, gaits: dict) -> dict[str, list[list[str]]]:
     """Per task, the gait of each action of each episode the job's evaluation recorded (its plan's artifacts, each
     checked against its key first)."""
     from hierloco.components.gaits import classify_actions
-    from hierloco.io import load_arrays
-    from hierloco.pipeline.rundir import RunDirectory
 
-    directory = RunDirectory(job.run_dir, readonly=True)
-    specs = {spec.name: spec for spec in studies.planned_stages(job)}
     legs, steps = gait_context(job)
-    found = {}
-    for task in tasks:
-        spec = specs[f"evaluation_normal_{task}"]
-        if not directory.check(spec.name, spec.key, spec.filename):
-            raise FileNotFoundError(f"{job.run_dir}: the evaluation {spec.filename} is not there")
-        arrays, _ = load_arrays(directory.path / spec.filename)
-        found[task] = [classify_actions(contacts, steps, gaits, legs) for contacts in arrays["foot_contacts"]]
-    return found
+    return {task: [classify_actions(contacts, steps, gaits, legs)
+                   for contacts in evaluation_arrays(job, task)["foot_contacts"]] for task in tasks}
 
 
 def gait_context(job) -> tuple[list[str], int]:
@@ -149,11 +195,13 @@ def gaits_markdown(labels: list[dict], rows: list[dict], gaits: dict, tasks, *, 
 
 @study_main(__file__)
 def main(cfg) -> None:
+    from hierloco.pipeline.report import wallclock_markdown
     from hierloco.results import csv_text
 
     spec = check(cfg)
-    planned = jobs(cfg, spec)
-    results = run_study(cfg, planned)
+    planned, profiled = jobs(cfg, spec)
+    results = run_study(cfg, planned + profiled)
+    results, profile_results = results[:len(planned)], results[len(planned):]
     tasks = main_tasks(cfg)
     gaits = gaits_of(cfg)
     rows = [{**row, **r.job.labels} for r in results if r.ok for row in r.rows if row["setting"] == "normal"]
@@ -165,10 +213,10 @@ def main(cfg) -> None:
     for result in results:
         if not (result.ok and result.job.labels["method"] == several):
             continue
-        seed = int(next(o.split("=", 1)[1] for o in result.job.overrides if o.startswith("seed=")))
         per_task = action_gaits(result.job, tasks, gaits)
         first = first or (result.job, per_task)
-        labels += [{"robot": spec.name, "seed": seed, "task": task, "episode": e, "action": a, "gait": gait}
+        labels += [{"robot": spec.name, "seed": seed_of(result.job), "task": task, "episode": e, "action": a,
+                    "gait": gait}
                    for task, episodes in per_task.items() for e, sequence in enumerate(episodes)
                    for a, gait in enumerate(sequence)]
     if labels:
@@ -178,8 +226,146 @@ def main(cfg) -> None:
                                                           f"{list(cfg.seeds)}"))
         plot_diagrams(first, tasks, out, cfg.diagrams)
         print((out / "gaits.md").read_text())
+    if profiled:
+        write_profile(cfg, spec, profile_results, out, own=own, several=several)
+        write_text(out / "wallclock.md", wallclock_markdown([*results, *profile_results]))
     print(f"gait tables and diagrams in {out}/")
-    end_study(results)
+    end_study(results + profile_results)
+
+
+def seed_of(job) -> int:
+    return int(next(o.split("=", 1)[1] for o in job.overrides if o.startswith("seed=")))
+
+
+def action_speeds(com_paths: np.ndarray, targets: np.ndarray, steps: int, step_duration: float) -> np.ndarray:
+    """``E x T`` the CoM's mean velocity over each latent action projected on that action's velocity target (m/s,
+    world frame), from ``E x (T * steps) x >=2`` CoM paths that start at the origin (the tasks' start) and ``T x 2``
+    targets."""
+    paths = np.asarray(com_paths)[..., :2]
+    ends = paths[:, steps - 1::steps]                                  # E x T: where each action ended
+    starts = np.concatenate([np.zeros_like(ends[:, :1]), ends[:, :-1]], axis=1)
+    velocity = (ends - starts) / step_duration
+    direction = targets / np.maximum(np.linalg.norm(targets, axis=-1, keepdims=True), 1e-9)
+    return (velocity * direction[None]).sum(-1)
+
+
+def profile_rows(cfg, results, *, several: str, gaits: dict) -> list[dict]:
+    """One row per latent action of every profile episode: seed, library, the action's target speed (m/s), the
+    CoM's speed along it (m/s) and, in the several-gait runs, its gait."""
+    from hierloco.components.gaits import classify_actions
+    from hierloco.pipeline.config import make_task_from_spec
+
+    import torch
+
+    found = []
+    for result in results:
+        if not result.ok:
+            continue
+        legs, steps = gait_context(result.job)
+        for name, options in profile_of(cfg).items():
+            task = make_task_from_spec(name, options)
+            arrays = evaluation_arrays(result.job, name)
+            for episode, (paths, contacts) in enumerate(zip(arrays["com_paths"], arrays["foot_contacts"])):
+                targets = task.target(torch.full((task.num_steps,), episode), torch.arange(task.num_steps)).numpy()
+                speeds = action_speeds(paths[None], targets, steps, task.step_duration)[0]
+                labels = (classify_actions(contacts, steps, gaits, legs) if result.job.labels["method"] == several
+                          else [""] * task.num_steps)
+                found += [{"seed": seed_of(result.job), "method": result.job.labels["method"], "task": name,
+                           "episode": episode, "action": a, "target_speed": round(float(np.linalg.norm(target)), 4),
+                           "speed": round(float(speed), 4), "gait": gait}
+                          for a, (target, speed, gait) in enumerate(zip(targets, speeds, labels))]
+    return found
+
+
+def segments(targets: list[float]) -> list[tuple[int, int]]:
+    """``(first, end)`` action indices of each stretch of one target speed, in order."""
+    bounds = [0] + [a for a in range(1, len(targets)) if targets[a] != targets[a - 1]] + [len(targets)]
+    return list(zip(bounds, bounds[1:]))
+
+
+def profile_markdown(found: list[dict], costs: list[dict], gaits: dict, *, own: str, several: str, title: str) -> str:
+    """Per profile task: per stretch of one target speed, each gait's share of the several-gait runs' actions, their
+    switches, and the CoM's speed along the target with each library; where the switches fall (at a change of
+    target or inside a stretch); the normalised cost of both libraries with the test "several gaits cost as little
+    as the own gait" (``docs/statistics.md``)."""
+    from hierloco.stats import decide_close
+    from recipes.compare.paper_check import seed_means
+
+    names = sorted(gaits)
+    lines = [f"# Gait transitions on a speed profile ({title})", ""]
+    for task in dict.fromkeys(r["task"] for r in found):
+        of = [r for r in found if r["task"] == task]
+        episodes: dict = {}
+        for r in of:
+            episodes.setdefault((r["method"], r["seed"], r["episode"]), []).append(r)
+        mixed = [sequence for (method, _, _), sequence in episodes.items() if method == several]
+        reference = next(iter(episodes.values()))
+        stretches = segments([r["target_speed"] for r in reference])
+        lines += [f"## {task.replace('_', ' ')}", "",
+                  f"Each latent action's gait in the {several} runs ({len(mixed)} episodes), and the CoM's speed "
+                  "along the target (m/s, mean over seeds and episodes) with each library.", "",
+                  f"| actions | target (m/s) | {' | '.join(names)} | switches inside | speed, {several} | "
+                  f"speed, {own} |", "|---|---|" + "---|" * len(names) + "---|---|---|"]
+        for first, end in stretches:
+            chosen = [r["gait"] for sequence in mixed for r in sequence[first:end]]
+            inside = [switches([r["gait"] for r in sequence[first:end]]) for sequence in mixed]
+            speed = {method: [r["speed"] for (m, _, _), sequence in episodes.items() if m == method
+                              for r in sequence[first:end]] for method in (several, own)}
+            shares = " | ".join(f"{100 * chosen.count(name) / max(1, len(chosen)):.0f} %" for name in names)
+            lines.append(f"| {first}-{end - 1} | {reference[first]['target_speed']:.2f} | {shares} | "
+                         f"{np.mean(inside) if inside else float('nan'):.1f} | "
+                         f"{np.mean(speed[several]) if speed[several] else float('nan'):.3f} | "
+                         f"{np.mean(speed[own]) if speed[own] else float('nan'):.3f} |")
+        changes = {first for first, _ in stretches[1:]}
+        at_change = sum(sequence[a]["gait"] != sequence[a - 1]["gait"] for sequence in mixed for a in changes)
+        total = sum(switches([r["gait"] for r in sequence]) for sequence in mixed)
+        chance = len(changes) / max(1, len(reference) - 1)
+        lines += ["", f"Switches: {total} in all, {at_change} at the first action after a change of target "
+                  f"({100 * at_change / max(1, total):.0f} %; {100 * chance:.0f} % of the action boundaries are "
+                  "changes of target).", ""]
+        a, b = (seed_means(costs, method=method, robot=costs[0]["robot"] if costs else "", setting="normal",
+                           task=task) for method in (several, own))
+        verdict = decide_close(a, b).text() if a.size and b.size else "not measured"
+        lines += [f"| normalised cost | {own} | {several} | verdict |", "|---|---|---|---|",
+                  f"| {task.replace('_', ' ')} | {b.mean() if b.size else float('nan'):.3f} | "
+                  f"{a.mean() if a.size else float('nan'):.3f} | {verdict} |", ""]
+    return "\n".join(lines)
+
+
+def write_profile(cfg, spec, results, out: Path, *, own: str, several: str) -> None:
+    """``profile.csv`` (one row per action), ``profile.md`` and ``gait_<task>_profile.png`` (the first seed's
+    several-gait episode, from two actions before the fastest target) in ``out``."""
+    from hierloco.plots import plot_gait_diagram
+    from hierloco.results import csv_text
+
+    gaits = gaits_of(cfg)
+    found = profile_rows(cfg, results, several=several, gaits=gaits)
+    costs = [{**row, **r.job.labels} for r in results if r.ok for row in r.rows if row["setting"] == "normal"]
+    title = f"{spec.name}, {cfg.preset_name} preset, seeds {list(cfg.seeds)}"
+    if not found:
+        write_text(out / "profile.md", f"# Gait transitions on a speed profile ({title})\n\nNo job finished.\n"
+                   + missing_markdown(results))
+        return
+    write_text(out / "profile.csv", csv_text(found, list(found[0])))
+    write_text(out / "profile_costs.csv", csv_text(costs, list(costs[0])))
+    write_text(out / "profile.md", profile_markdown(found, costs, gaits, own=own, several=several, title=title)
+               + missing_markdown(results))
+    print((out / "profile.md").read_text())
+    first = next((r for r in results if r.ok and r.job.labels["method"] == several), None)
+    if first is None:
+        return
+    legs, steps = gait_context(first.job)
+    for task in profile_of(cfg):
+        sequence = [r for r in found if r["task"] == task and r["method"] == several and r["seed"] == seed_of(first.job)
+                    and r["episode"] == 0]
+        fastest = max(range(len(sequence)), key=lambda a: (sequence[a]["target_speed"], -a))
+        start = max(0, min(fastest - 2, len(sequence) - DIAGRAM_ACTIONS))
+        window = sequence[start:start + DIAGRAM_ACTIONS]
+        contacts = evaluation_arrays(first.job, task)["foot_contacts"][0][start * steps:(start + len(window)) * steps]
+        speeds = " ".join(f"{r['target_speed']:g}" for r in window)
+        plot_gait_diagram(contacts, legs, out / f"gait_{task}_profile.png", action_steps=steps,
+                          title=f"{task.replace('_', ' ')}, actions {start}-{start + len(window) - 1}: "
+                                + " ".join(r["gait"] for r in window) + f" (targets {speeds} m/s)")
 
 
 DIAGRAM_ACTIONS = 8  # latent actions a gait diagram shows

@@ -1,9 +1,11 @@
 """LAT with experts over several gaits (``experts.gaits``): one gait policy and latent space over all of them."""
 
+import numpy as np
 import pytest
 
 from hierloco.components.expert_library import ExpertLibrary
 from hierloco.results import read_csv
+from recipes.gaits.run import action_speeds, profile_markdown, segments
 from tests.recipes.test_device_keys import changed, plan
 from tests.runner import run_in_process, run_subprocess
 
@@ -37,6 +39,9 @@ def test_a_gait_the_robot_cannot_walk_is_one_line_before_any_work(tmp_path):
     ("own=pace", "own: gait 'pace' [['FR', 'RR'], ['FL', 'RL']] is not a1's own gait groups"),
     ("own=gallop", "own: 'gallop' is not one of the gaits"),
     ("gaits.pace=[[FR,XX],[FL,RL]]", "gait 'pace': "),
+    ("+profile.reach={task: goal_reaching}", "profile task 'reach' is a goal_reaching task"),
+    ("profile.speed_profile.rounds=0", "profile task 'speed_profile': eval task 'speed_profile': rounds must be"),
+    ("own_runs=runs/mlp", "own_runs must be a path holding {seed}"),
 ])
 def test_the_gait_study_refuses_a_bad_config_in_one_line(tmp_path, override, message):
     result = run_in_process("gaits", "preset=tiny", "seeds=[0]", override, cwd=tmp_path)
@@ -62,3 +67,47 @@ def test_the_gait_study_labels_every_executed_action_and_draws_the_switches(tmp_
     assert "| goal reaching | " in text and "## Cost" in text
     diagrams = sorted(out.glob("gait_*_episode*.png"))
     assert len(diagrams) == 2 and all(p.read_bytes()[:4] == b"\x89PNG" for p in diagrams)
+    # the speed profile: both libraries' trained runs evaluated on it alone, each action labelled
+    profile = read_csv(out / "profile.csv")
+    assert {r["method"] for r in profile} == {"own gait (trot)", "3 gaits"}
+    assert [float(r["target_speed"]) for r in profile if r["method"] == "3 gaits"] == [0.05] * 5 + [0.15] * 5 + \
+        [0.3] * 5 + [0.15] * 5 + [0.05] * 5
+    assert {r["gait"] for r in profile if r["method"] == "3 gaits"} <= {"trot", "pace", "bound"}
+    assert {r["gait"] for r in profile if r["method"] == "own gait (trot)"} == {""}
+    assert "| 10-14 | 0.30 |" in (out / "profile.md").read_text()
+    assert (out / "gait_speed_profile_profile.png").read_bytes()[:4] == b"\x89PNG"
+    runs = tmp_path / "outputs" / "gaits" / "tiny"
+    evaluated = {p.name.split("-")[0] for p in (runs / "a1_seed0_profile" / "evaluation" / "normal").glob("*.npz")}
+    assert evaluated == {"speed_profile"}  # the profile alone, on the several-gait run's trained stages
+
+
+def test_action_speeds_are_each_actions_mean_velocity_along_its_target():
+    steps = 4
+    # the CoM moves +y at 0.1 m/s for two 1 s actions, then +x at 0.2 m/s (paths sampled at the end of each step)
+    time = np.arange(1, 3 * steps + 1) / steps
+    y = np.minimum(time, 2.0) * 0.1
+    x = np.maximum(time - 2.0, 0.0) * 0.2
+    paths = np.stack([x, y], -1)[None]
+    targets = np.array([[0.0, 0.1], [0.0, 0.3], [0.0, 0.3]])
+    speeds = action_speeds(paths, targets, steps, 1.0)
+    np.testing.assert_allclose(speeds, [[0.1, 0.1, 0.0]], atol=1e-12)  # the last action moves across its target
+
+
+def test_the_profile_table_counts_gaits_per_target_and_where_the_switches_fall():
+    targets = [0.05, 0.05, 0.3, 0.3]
+    found = []
+    for seed, gaits in ((0, ["trot", "trot", "bound", "bound"]), (1, ["trot", "pace", "pace", "bound"])):
+        found += [{"seed": seed, "method": "3 gaits", "task": "speed_profile", "episode": 0, "action": a,
+                   "target_speed": t, "speed": t / 2, "gait": g} for a, (t, g) in enumerate(zip(targets, gaits))]
+        found += [{"seed": seed, "method": "own gait (trot)", "task": "speed_profile", "episode": 0, "action": a,
+                   "target_speed": t, "speed": t, "gait": ""} for a, t in enumerate(targets)]
+    costs = [{"robot": "a1", "setting": "normal", "task": "speed_profile", "method": m, "seed": s, "normalized_cost": c}
+             for s in (0, 1) for m, c in (("3 gaits", 0.5), ("own gait (trot)", 0.2))]
+    assert segments(targets) == [(0, 2), (2, 4)]
+    text = profile_markdown(found, costs, {"trot": 0, "pace": 0, "bound": 0}, own="own gait (trot)",
+                            several="3 gaits", title="a1")
+    # per stretch: bound, pace, trot shares; switches inside; speeds with each library
+    assert "| 0-1 | 0.05 | 0 % | 25 % | 75 % | 0.5 | 0.025 | 0.050 |" in text
+    assert "| 2-3 | 0.30 | 75 % | 25 % | 0 % | 0.5 | 0.150 | 0.300 |" in text
+    assert "Switches: 3 in all, 1 at the first action after a change of target (33 %; 33 % of" in text
+    assert "| speed profile | 0.200 | 0.500 |" in text
