@@ -142,6 +142,7 @@ def wallclock_markdown(results) -> str:
              "| method | run directory (or record) | this study (min) | compute (min) | threads | stages not recorded | reused |",
              "|---|---|---|---|---|---|---|"]
     per_method: dict[tuple[str, str], list[float]] = {}
+    copied = 0.0  # seconds of stages a job copied from another run (``reuse_from``): counted again in that job
     for result in results:
         source = result.source  # the run directory, or the job's record
         seconds = result.recorded_seconds if result.reused else result.seconds
@@ -154,6 +155,7 @@ def wallclock_markdown(results) -> str:
         robot = _robot_name(result.job)
         if stages and not missing:
             per_method.setdefault((method, robot), []).append(compute)
+            copied += sum(v for n, v in stages.items() if v is not None and "copied_from" in result.builds.get(n, {}))
         lines.append(f"| {method} | {source} | {seconds / 60:.1f} | {compute / 60:.1f} | "
                      f"{', '.join(map(str, threads)) or '-'} | {missing} | {_reuse_word(result, source)} |")
     if per_method:
@@ -163,5 +165,7 @@ def wallclock_markdown(results) -> str:
             lines.append(f"| {method} | {robot} | {len(values)} | {sum(values) / len(values) / 60:.1f} | "
                          f"{sum(values) / 60:.1f} |")
         total = sum(sum(v) for v in per_method.values())
-        lines += ["", f"In all {total / 60:.1f} min of compute."]
+        once = (f" ({(total - copied) / 60:.1f} min with each stage counted once: {copied / 60:.1f} min are stages "
+                "copied from another run, counted in every job that uses them)") if copied else ""
+        lines += ["", f"In all {total / 60:.1f} min of compute{once}."]
     return "\n".join(lines) + "\n"

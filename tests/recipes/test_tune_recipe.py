@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from hierloco.results import read_csv
+from tests.runner import run_in_process
 
 ROOT = Path(__file__).resolve().parents[2]
 SMALL = ["eval.generalization=null", "eval.videos=[]", "eval.figures=false", "progress=false"]
@@ -91,3 +92,14 @@ def test_tune_sac_tiny_reuses_the_comparison_agents_for_the_paper_candidate(tmp_
         train_goals = [r for r in rows if r["candidate"] == candidate and r["task"] == "goal_reaching_train"]
         assert len(train_goals) == (test_goals + 1) // 2
     assert "Tuning SAC" in (out / "tune.md").read_text()
+
+
+@pytest.mark.parametrize("override, message", [
+    ("incumbent=tuned", "incumbent 'tuned' is not a candidate (integral, plain)"),
+    ("incumbent=null", "incumbent None is not a candidate"),
+])
+def test_an_incumbent_that_is_not_a_candidate_is_one_line_before_any_work(tmp_path, override, message):
+    result = run_in_process("tune", "preset=tiny", "robots=[a1]", "seeds=[0]", override, cwd=tmp_path)
+    assert result.returncode == 2 and len(result.lines) == 1 and result.lines[0].startswith("error: "), result.stderr
+    assert message in result.lines[0], result.lines[0]
+    assert not (tmp_path / "outputs").exists()
