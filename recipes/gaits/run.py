@@ -323,6 +323,18 @@ def profile_markdown(found: list[dict], costs: list[dict], gaits: dict, *, own: 
         lines += ["", f"Switches: {total} in all, {at_change} at the first action after a change of target "
                   f"({100 * at_change / max(1, total):.0f} %; {100 * chance:.0f} % of the action boundaries are "
                   "changes of target).", ""]
+        fastest = max(r["target_speed"] for r in reference)
+        lines += [f"Per seed, each gait's share of the actions at the fastest target ({fastest:.2f} m/s) and at the "
+                  "others (a gait picked for speed is picked more at the fastest target in every seed):", "",
+                  f"| seed | {' | '.join(names)} |", "|---|" + "---|" * len(names)]
+        for seed in sorted({s for (m, s, _) in episodes if m == several}):
+            mine = [r for (m, s, _), sequence in episodes.items() if m == several and s == seed for r in sequence]
+            fast = [r["gait"] for r in mine if r["target_speed"] == fastest]
+            slow = [r["gait"] for r in mine if r["target_speed"] != fastest]
+            cells = [f"{100 * fast.count(n) / max(1, len(fast)):.0f} % / "
+                     f"{100 * slow.count(n) / max(1, len(slow)):.0f} %" for n in names]
+            lines.append(f"| {seed} | {' | '.join(cells)} |")
+        lines.append("")
         a, b = (seed_means(costs, method=method, robot=costs[0]["robot"] if costs else "", setting="normal",
                            task=task) for method in (several, own))
         verdict = decide_close(a, b).text() if a.size and b.size else "not measured"

@@ -111,3 +111,6 @@ def test_the_profile_table_counts_gaits_per_target_and_where_the_switches_fall()
     assert "| 2-3 | 0.30 | 75 % | 25 % | 0 % | 0.5 | 0.150 | 0.300 |" in text
     assert "Switches: 3 in all, 1 at the first action after a change of target (33 %; 33 % of" in text
     assert "| speed profile | 0.200 | 0.500 |" in text
+    # per seed: share at the fastest target / at the others (bound, pace, trot)
+    assert "| 0 | 100 % / 0 % | 0 % / 0 % | 0 % / 100 % |" in text
+    assert "| 1 | 50 % / 0 % | 50 % / 50 % | 0 % / 50 % |" in text
