@@ -271,4 +271,46 @@ class CoMEnsembleModel(nn.Module):
                 "heldout_member_std": float(means.std(0, correction=0).mean())}
 
 
-__all__ = ["HEADS", "MEMBER_DATA", "PROPAGATIONS", "CoMEnsembleModel", "EnsembleLinear"]
+CALIBRATION_OUTPUTS = ("dx", "dy", "dyaw", "vx", "vy")  # the local-frame delta: m, m, rad, m/s, m/s
+
+
+@torch.no_grad()
+def transition_calibration(model: CoMEnsembleModel, com_state, action, next_com_state) -> dict[str, list[float]]:
+    """Whether the members' disagreement tells where the model is wrong, on ``N`` transitions: ``N x 5`` world CoM
+    states before and after one action, ``N x A`` action features (e.g. transitions collected on a damaged or
+    perturbed robot the model never saw).
+
+    Per output of the local-frame delta (:data:`CALIBRATION_OUTPUTS`): ``error``, the RMS error of the members'
+    mean; ``spread``, the RMS over transitions of the members' standard deviation about their mean (the epistemic
+    part, what ``planner.risk`` weighs); ``noise``, the RMS of the Gaussian heads' standard deviation (the aleatoric
+    part, 0 with a deterministic head); ``coverage``, the fraction of transitions whose error lies within two
+    predictive standard deviations (spread and noise together; 0.95 for a calibrated Gaussian).
+
+        >>> model = CoMEnsembleModel(action_dim=3, hidden=16, members=3)
+        >>> state = torch.zeros(4, 5)
+        >>> report = transition_calibration(model, state, torch.rand(4, 3), state)
+        >>> sorted(report), len(report["error"])
+        (['coverage', 'error', 'noise', 'spread'], 5)
+    """
+    from hierloco.components.com_model import local_transition
+
+    state, next_state = _as_float_tensor(com_state), _as_float_tensor(next_com_state)
+    velocity_local, delta = local_transition(state, next_state)
+    means, variances = model.members(velocity_local.float(), _as_float_tensor(action))  # N x M x 5
+    delta = delta.to(means)
+    centre = means.mean(-2)
+    error = centre - delta
+    error = torch.cat([error[..., :2], wrap_angle(error[..., 2:3]), error[..., 3:]], -1)
+    spread = means.std(-2, correction=0)
+    noise = torch.zeros_like(spread) if variances is None else variances.mean(-2).sqrt()
+    total = (spread ** 2 + noise ** 2).sqrt()
+
+    def rms(x: torch.Tensor) -> list[float]:
+        return [float(v) for v in x.pow(2).mean(0).sqrt()]
+
+    return {"error": rms(error), "spread": rms(spread), "noise": rms(noise),
+            "coverage": [float(v) for v in (error.abs() <= 2 * total).float().mean(0)]}
+
+
+__all__ = ["CALIBRATION_OUTPUTS", "HEADS", "MEMBER_DATA", "PROPAGATIONS", "CoMEnsembleModel", "EnsembleLinear",
+           "transition_calibration"]

@@ -38,6 +38,9 @@ def check(cfg) -> list:
     problems += [f"unknown risk {r!r} (risks: {', '.join(RISKS)})" for r in cfg.risks if r not in RISKS]
     if not (isinstance(cfg.members, int) and cfg.members >= 2):
         problems.append(f"members must be an integer >= 2, got {cfg.members!r}")
+    transitions = cfg.get("calibration_transitions")
+    if isinstance(transitions, bool) or not (isinstance(transitions, int) and transitions >= 0):
+        problems.append(f"calibration_transitions must be an integer >= 0, got {transitions!r}")
     if problems:
         raise ConfigError("bad config: " + "; ".join(problems))
     return robots
@@ -96,8 +99,113 @@ def paired_table(rows: list[dict], methods: list[str], tasks) -> str:
     return "\n".join(lines) + "\n"
 
 
+def verdict_table(rows: list[dict], methods: list[str], tasks) -> str:
+    """Per robot, setting and task, each ensemble variant against the MLP by the stated tests over seeds, paired by
+    seed (``docs/statistics.md``): "better" (a lower cost by at least the minimum effect) and "close" (within the
+    equivalence margin); then how many places each variant is better, close, or worse."""
+    from hierloco.stats import decide_better, decide_close
+    from recipes.compare.paper_check import seed_means
+
+    lines = ["| robot | setting | task | variant | better than the MLP? | as good as the MLP (close)? |",
+             "|---|---|---|---|---|---|"]
+    tally: dict = {}
+    places = sorted({(r["robot"], r["setting"], r["task"]) for r in rows if r["task"] in tasks})
+    for robot, setting, task in places:
+        for method in methods[1:]:
+            pairs = []
+            for seed in sorted({r["seed"] for r in rows}):
+                of_seed = [r for r in rows if r["seed"] == seed]
+                pairs.append(tuple(seed_means(of_seed, method=m, robot=robot, setting=setting, task=task)
+                                   for m in (method, "mlp")))
+            pairs = [(a[0], b[0]) for a, b in pairs if a.size and b.size]
+            if not pairs:
+                continue
+            a, b = (np.array(x) for x in zip(*pairs))
+            better, close = decide_better(a, b, paired=True), decide_close(a, b, paired=True)
+            worse = decide_better(b, a, paired=True)
+            word = ("better" if better.verdict == "holds" else "worse" if worse.verdict == "holds"
+                    else "close" if close.verdict == "holds" else "not testable" if "testable" in close.verdict
+                    else "undecided")
+            tally.setdefault(method, {}).setdefault(word, 0)
+            tally[method][word] += 1
+            lines.append(f"| {robot} | {setting} | {task} | {method} | {better.text()} | {close.text()} |")
+    lines += ["", "| variant | better | close | worse | not testable | undecided |", "|---|---|---|---|---|---|"]
+    for method, counts in tally.items():
+        lines.append(f"| {method} | " + " | ".join(str(counts.get(w, 0)) for w in
+                                                  ("better", "close", "worse", "not testable", "undecided")) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def calibration_rows(cfg, results) -> list[dict]:
+    """Per risk-neutral ensemble run and setting: :func:`~hierloco.components.com_ensemble.transition_calibration`
+    of the model its planner used there (the normal model on the unadapted robot) on ``calibration_transitions``
+    fresh transitions collected in that setting with the run's low level (seed ``1000 + seed``: never its training
+    data). The run's model artifacts are checked against the keys its plan names first."""
+    from hierloco.components.com_ensemble import CALIBRATION_OUTPUTS, transition_calibration
+    from hierloco.components.dynamics_data import collect_transitions
+    from hierloco.envs.faults import fault_legs, is_unadapted, setting_robot
+    from hierloco.envs.latent_env import LatentActionEnv
+    from hierloco.pipeline.config import compose_recipe
+    from hierloco.pipeline.rundir import RunDirectory
+    from hierloco.pipeline.stages import hardware_params
+    from hierloco.trained import load_run
+
+    found = []
+    for result in results:
+        if not (result.ok and result.job.labels["method"] == "ensemble"):
+            continue
+        job = result.job
+        run_cfg = compose_recipe("lat", [f"run_dir={job.run_dir}", *job.overrides])
+        directory = RunDirectory(job.run_dir, readonly=True)
+        specs = {spec.name: spec for spec in studies.planned_stages(job)}
+        run = load_run(job.run_dir)
+        for setting in cfg.settings:
+            model_setting = "normal" if is_unadapted(setting) else setting
+            spec = specs[f"dynamics_model_{model_setting}"]
+            if not directory.check(spec.name, spec.key, spec.filename):
+                raise FileNotFoundError(f"{job.run_dir}: {spec.filename} is not the one its plan names")
+            locked, limp = fault_legs(run.robot, setting)
+            robot = setting_robot(run.robot, setting, hardware_params(run_cfg, setting).get("hardware"))
+            num_robots = int(run_cfg.dynamics.num_robots)
+            low_level = run.low_level(num_robots=num_robots)
+            env = LatentActionEnv(low_level, num_robots=num_robots, disabled_legs=locked, limp_legs=limp,
+                                  seed=1000 + int(run_cfg.seed), nthread=1, robot=robot)
+            try:
+                data = collect_transitions(env, cfg.calibration_transitions, seed=1000 + int(run_cfg.seed),
+                                           progress=False)
+            finally:
+                env.close()
+            report = transition_calibration(run.com_model(model_setting).model, data.com_state,
+                                            low_level.action_features(data.action), data.next_com_state)
+            for i, output in enumerate(CALIBRATION_OUTPUTS):
+                found.append({"robot": run.robot.name, "seed": int(run_cfg.seed), "setting": setting,
+                              "model": model_setting, "output": output,
+                              **{k: round(v[i], 5) for k, v in report.items()}})
+    return found
+
+
+def calibration_markdown(found: list[dict]) -> str:
+    """Per robot and setting, each output's error of the members' mean against their spread (mean over seeds), and
+    the coverage of two predictive standard deviations."""
+    from hierloco.components.com_ensemble import CALIBRATION_OUTPUTS
+
+    lines = ["| robot | setting (model) | " + " | ".join(f"{o}: error / spread / noise" for o in CALIBRATION_OUTPUTS)
+             + " | within 2 std | seeds |", "|---|---|" + "---|" * len(CALIBRATION_OUTPUTS) + "---|---|"]
+    for robot, setting, model in dict.fromkeys((r["robot"], r["setting"], r["model"]) for r in found):
+        of = [r for r in found if (r["robot"], r["setting"]) == (robot, setting)]
+        cells = []
+        for output in CALIBRATION_OUTPUTS:
+            mine = [r for r in of if r["output"] == output]
+            cells.append(" / ".join(f"{np.mean([r[k] for r in mine]):.3f}" for k in ("error", "spread", "noise")))
+        lines.append(f"| {robot} | {setting} ({model}) | " + " | ".join(cells)
+                     + f" | {100 * np.mean([r['coverage'] for r in of]):.0f} % | {len({r['seed'] for r in of})} |")
+    return "\n".join(lines) + "\n"
+
+
 @study_main(__file__)
 def main(cfg) -> None:
+    from hierloco.results import csv_text
+
     robots = check(cfg)
     results = run_study(cfg, jobs(cfg, robots))
     rows = [{**row, "method": result.job.labels["method"]} for result in results if result.ok for row in result.rows]
@@ -113,7 +221,23 @@ def main(cfg) -> None:
                                                      "over seeds; in brackets the paired difference from the MLP "
                                                      "(per seed) with its standard error.\n\n" + paired
                                                      + "\n## Every task\n\n| method", 1))
-        print("\n" + paired)
+        verdicts = verdict_table(rows, methods, main_tasks(cfg))
+        write_text(out / "verdicts.md", f"# Ensemble variants against the MLP, by the stated tests\n\n{title}. "
+                   "Paired by seed; alpha 0.05; better: at least 10 % (and 0.01) lower; close: within 20 % (or "
+                   "0.01); not testable: both at or above 0.9 (`docs/statistics.md`).\n\n" + verdicts)
+        print("\n" + paired + "\n" + verdicts)
+    if rows and cfg.calibration_transitions:
+        found = calibration_rows(cfg, results)
+        if found:
+            write_text(out / "calibration.csv", csv_text(found, list(found[0])))
+            write_text(out / "calibration.md", "# Does the members' disagreement see the model's error?\n\n"
+                       f"Per risk-neutral ensemble run: {cfg.calibration_transitions} fresh transitions per setting "
+                       "with the run's low level, scored by the model its planner used there (the normal model on "
+                       "the unadapted robot). Per output of the local-frame delta (m, m, rad, m/s, m/s): the RMS "
+                       "error of the members' mean / the RMS spread of the members (what `planner.risk` weighs) / "
+                       "the RMS noise of their Gaussian heads, mean over seeds; the share of errors within two "
+                       "predictive standard deviations (95 % when calibrated).\n\n" + calibration_markdown(found))
+            print((out / "calibration.md").read_text())
     print(f"ensemble tables in {out}/")
     end_study(results)
 

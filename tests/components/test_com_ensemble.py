@@ -208,3 +208,23 @@ def test_propagation_modes():
         torch.testing.assert_close(sample[:, [0, 1, 3, 4]].mean(0), centre[0, [0, 1, 3, 4]], atol=0.01, rtol=0)
         torch.testing.assert_close(sample[:, [0, 1, 3, 4]].std(0), spread[0, [0, 1, 3, 4]], atol=0.01, rtol=0.02)
         assert bool((wrap_angle(sample[:, 2]) == sample[:, 2]).all())
+
+
+def test_transition_calibration_tells_a_known_system_from_a_shifted_one(ensemble):
+    """On fresh transitions of the system it learned, the mean's error is about the noise and 2 predictive standard
+    deviations cover about 95 %; on the same inputs with every dx shifted by 0.2 m (a robot the model never saw), the
+    error of dx grows by the shift while the members' spread stays as it was: the disagreement cannot see a shift
+    the data never showed."""
+    from hierloco.components.com_ensemble import transition_calibration
+    from hierloco.components.com_model import apply_delta
+
+    state, action, next_state, _ = _synthetic_transitions(1000, seed=1)
+    known = transition_calibration(ensemble.model, state, action, next_state)
+    assert all(0.7 * NOISE <= e < 2 * NOISE for e in known["error"]), known
+    assert all(0.88 <= c <= 0.99 for c in known["coverage"]), known
+    assert all(s < n for s, n in zip(known["spread"], known["noise"])), known  # inside the data: mostly noise
+    _, delta = local_transition(torch.as_tensor(state), torch.as_tensor(next_state))
+    shifted = apply_delta(torch.as_tensor(state), delta + torch.tensor([0.2, 0.0, 0.0, 0.0, 0.0], dtype=delta.dtype))
+    moved = transition_calibration(ensemble.model, state, action, shifted)
+    assert moved["error"][0] > 0.19 and moved["coverage"][0] < 0.1, moved
+    assert moved["spread"] == known["spread"] and moved["error"][1:] == pytest.approx(known["error"][1:], rel=1e-4)
