@@ -447,9 +447,9 @@ NOT_MEASURED_YET = [
      "a test of the claim itself over seeds (`gaits/`: the planner switches gait every few actions on both robots; "
      "Daisy over tripod and ripple, 3 seeds, is close to the tripod alone at goals and on the path, not at velocity "
      "tracking; A1 over trot, pace and bound, seeds 0 and 2, costs far more than trot; on a speed profile, 0.05 to "
-     "0.30 m/s and back, it does not pick gaits by speed on either robot (`gaits/profile.md`): every gait's experts "
-     "cover the command box, so no task within it needs a change of gait, and \"if needed by the task\" has no "
-     "task to be tested on here)"),
+     "0.30 m/s and back, it does not pick gaits by speed on either robot (`gaits/profile.md`): the gaits' experts "
+     "cover about the same command box, so no task within it needs a change of gait, and \"if needed by the task\" "
+     "has no task to be tested on here)"),
     ("\"Our method can directly be used with waypoint navigation methods to reach a desired goal\"",
      "Sec. I; Fig. 2", "a navigation study with records over several arenas and seeds (`navigation/`: one arena, "
      "seed 0, A1 and Daisy reach the goal within 0.03 m; no test over arenas and seeds yet)"),
