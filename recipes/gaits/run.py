@@ -13,6 +13,13 @@ several-gait runs is labelled with its gait from the foot contacts the evaluatio
 of actions in each gait, switches per episode; the cost of both libraries per task with the test of "several gaits
 cost as little as the own gait", ``docs/statistics.md``), ``gait_<task>_episode<k>.png`` (gait diagrams of the
 episodes with the most switches, first seed), ``costs.csv`` / ``costs.md`` / ``wallclock.md``.
+
+With ``profile`` (a task that needs a change of speed: forward velocity targets from slow to fast and back), each
+library's trained run is also evaluated on it alone, starting from its trained stages (the own gait's from
+``own_runs`` when set): ``profile.csv`` (one row per action: its target speed, the CoM's speed along it and, with
+several gaits, its gait), ``profile.md`` (per stretch of one target: the gaits' shares and switches, the speeds with
+each library; where the switches fall; per seed, the gaits at the fastest target; the cost test) and
+``gait_<task>_profile.png`` (the first seed's actions around the fastest target).
 """
 
 import hierloco  # noqa: F401  (first: the rendering backend is chosen before anything loads MuJoCo)
