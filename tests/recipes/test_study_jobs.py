@@ -9,7 +9,8 @@ import time
 
 import pytest
 
-CHILD = "from hierloco.pipeline.studies import die_with_parent; die_with_parent(); import time; time.sleep(120)"
+CHILD = ("from hierloco.pipeline.studies import die_with_parent; die_with_parent(); print('armed', flush=True); "
+         "import time; time.sleep(120)")  # says when its death signal is set: a loaded machine may import slowly
 PARENT = f"""
 import os, subprocess, sys, time
 env = {{**os.environ, "HIERLOCO_PARENT_PID": str(os.getpid())}}
@@ -31,6 +32,7 @@ def alive(pid: int) -> bool:
 def test_a_job_subprocess_ends_when_its_parent_is_killed():
     parent = subprocess.Popen([sys.executable, "-c", PARENT], stdout=subprocess.PIPE, text=True)
     child = int(parent.stdout.readline())
+    assert parent.stdout.readline().strip() == "armed"  # the child shares the parent's stdout
     assert alive(child)
     os.kill(parent.pid, signal.SIGKILL)
     parent.wait()
