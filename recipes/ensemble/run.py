@@ -159,6 +159,8 @@ def calibration_rows(cfg, results) -> list[dict]:
         directory = RunDirectory(job.run_dir, readonly=True)
         specs = {spec.name: spec for spec in studies.planned_stages(job)}
         run = load_run(job.run_dir)
+        num_robots = int(run_cfg.dynamics.num_robots)
+        low_level = run.low_level(num_robots=num_robots)  # one per run: an env's close leaves it usable
         for setting in cfg.settings:
             model_setting = "normal" if is_unadapted(setting) else setting
             spec = specs[f"dynamics_model_{model_setting}"]
@@ -166,8 +168,6 @@ def calibration_rows(cfg, results) -> list[dict]:
                 raise FileNotFoundError(f"{job.run_dir}: {spec.filename} is not the one its plan names")
             locked, limp = fault_legs(run.robot, setting)
             robot = setting_robot(run.robot, setting, hardware_params(run_cfg, setting).get("hardware"))
-            num_robots = int(run_cfg.dynamics.num_robots)
-            low_level = run.low_level(num_robots=num_robots)
             env = LatentActionEnv(low_level, num_robots=num_robots, disabled_legs=locked, limp_legs=limp,
                                   seed=1000 + int(run_cfg.seed), nthread=1, robot=robot)
             try:
