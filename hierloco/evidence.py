@@ -7,8 +7,9 @@ into :class:`Run` objects, one per job, setting and task, each labelled with wha
 - ``method``: the recipe of the job's signature, or its study name when the overrides make it a variant
   (:data:`VARIANTS`: ``ik`` with ``controller.footstep_law=plain`` is ``ik_plain``);
 - ``robot``, ``setting``, ``task``, ``seed`` from the rows, ``profile`` from ``robot_profile=`` (default ``own``);
-- ``factors``: the sizes the ablations vary (``latent_dim``, ``num_experts``, ``num_transitions``), read from the
-  stage keys, and ``options``: the job's other overrides;
+- ``factors``: the sizes the ablations and the sample-efficiency study vary (``latent_dim``, ``num_experts``,
+  ``num_transitions``: CoM transitions of the run's setting, ``high_level_frames``: the environment steps the task's
+  SAC high level trained on), read from the stage keys, and ``options``: the job's other overrides;
 - ``config``: the key of the run's evaluation stage (a hash of every stage key before it, seed included), so two
   runs with the same ``config`` are the same configuration and seed, run twice;
 - ``cpu`` (from ``builds.json``) and the job's compute in minutes (every stage's build time, ``builds.json``).
@@ -50,7 +51,10 @@ from typing import Iterable, Mapping, Sequence
 import numpy as np
 
 # study names of recipe variants: name -> (recipe, overrides that make it)
-VARIANTS: dict[str, tuple[str, tuple[str, ...]]] = {"ik_plain": ("ik", ("controller.footstep_law=plain",))}
+VARIANTS: dict[str, tuple[str, tuple[str, ...]]] = {
+    "ik_plain": ("ik", ("controller.footstep_law=plain",)),
+    "sac_sac_2x512": ("sac_sac", ("low_level.hidden=512",)),   # SAC-SAC's low level at the paper's 2 x 512
+}
 # overrides that say where and how a job ran, not what it is
 BOOKKEEPING = ("preset", "robot", "seed", "progress", "settings", "eval.generalization", "eval.videos", "nthread",
                "robot_profile")
@@ -220,8 +224,10 @@ def read_records(root: str | os.PathLike, *, folder: str = "", variants: Mapping
                           and "-" not in name.removeprefix(prefix).split(".")[0])
             data = stages.get(f"dynamics_data_{setting}.npz") or {}
             transitions = data.get("params", {}).get("num_transitions")
+            frames = (stages.get(f"sac_{task}.pt") or {}).get("params", {}).get("total_frames")
             stage = builds.get(f"evaluation_{setting}_{task}", {}) if isinstance(builds, dict) else {}
-            more = dict(factors, **({"num_transitions": transitions} if transitions is not None else {}))
+            more = dict(factors, **({"num_transitions": transitions} if transitions is not None else {}),
+                        **({"high_level_frames": frames} if frames is not None else {}))
             cpu = stage.get("cpu", "") if isinstance(stage, dict) else ""
             return {"config": "+".join(keys), "cpu": cpu or job_cpu, "factors": tuple(sorted(more.items()))}
 

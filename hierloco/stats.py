@@ -474,13 +474,17 @@ def power(a: Sequence[float], b: Sequence[float] | float, n: int, *, kind: str =
 def seeds_needed(a: Sequence[float], b: Sequence[float] | float, *, target: float = POWER, most: int = 100,
                  **options) -> int | None:
     """The fewest seeds per method (at least the ones measured) at which :func:`power` reaches ``target``, or
-    ``None`` when not even ``most`` would (say, an effect measured right at the minimum effect).
+    ``None`` when not even ``most`` would (say, an effect measured right at the minimum effect). A side measured on
+    one seed has no spread to go on: ``ValueError``.
 
         >>> seeds_needed([0.30, 0.40, 0.35], [0.45, 0.55, 0.40])     # inconclusive at 3 (p = 0.051)
         5
         >>> seeds_needed([0.68, 0.87, 0.54], [0.51, 1.01, 0.54]) is None   # 0.01 apart in a spread of 0.2
         True
     """
+    if _count(a) < 2 or (np.ndim(b) and _count(b) < 2):
+        raise ValueError(f"seeds_needed needs at least 2 seeds per side to measure the spread, got {_count(a)} and "
+                         f"{_count(b) if np.ndim(b) else 'a constant'}")
     start = max(_count(a), _count(b) if np.ndim(b) else 0, 2)
     for n in range(start, most + 1):
         if power(a, b, n, **options) >= target:

@@ -17,7 +17,7 @@ def write_record(root, relative, *, method, robot, seed, costs, overrides=(), ke
     """A verified job record (``record.json``, :mod:`hierloco.pipeline.records`) under ``root/relative``: ``costs``
     maps (setting, task) to episode costs; ``keys`` maps (setting, task) to the evaluation key's hash (default: one
     per method, robot, seed, setting, task and overrides); ``factors`` the stage-key sizes (latent_dim, num_experts,
-    num_transitions)."""
+    num_transitions, high_level_frames)."""
     from hierloco.pipeline import records
     from hierloco.pipeline.rundir import StageSpec
 
@@ -39,6 +39,9 @@ def write_record(root, relative, *, method, robot, seed, costs, overrides=(), ke
         specs.append(StageSpec("gait_policy", {"params": {"latent_dim": factors["latent_dim"]}}, "gait_policy.pt"))
     if "num_experts" in factors:
         specs.append(StageSpec("experts", {"params": {"num_experts": factors["num_experts"]}}, "experts.npz"))
+    if "high_level_frames" in factors:
+        specs += [StageSpec(f"sac_{task}", {"params": {"total_frames": factors["high_level_frames"]}}, f"sac_{task}.pt")
+                  for task in sorted({t for _, t in costs})]
     for setting in {s for s, _ in costs}:
         if "num_transitions" in factors:
             specs.append(StageSpec(f"dynamics_data_{setting}", {"params": {"num_transitions": factors["num_transitions"]}},
@@ -65,6 +68,23 @@ def test_records_are_labelled_from_their_signatures_and_stage_keys(tmp_path):
     assert goals.cost == pytest.approx(0.55)  # a fallen robot's NaN counts as 1
     assert job_compute(damaged.record) == (pytest.approx(2.0), 1, "Intel")
     assert math.isnan(job_compute(tmp_path / "nothing")[0])
+
+
+def test_a_high_levels_budget_and_the_2x512_sac_sac_are_read_from_the_record(tmp_path):
+    """SAC's steps per task come from its task's stage key (the sample-efficiency study varies them); SAC-SAC with
+    its low level at 2 x 512 is its own method, never a replicate of the 2 x 256 runs."""
+    costs = {("normal", "goal_reaching"): [0.2], ("normal", "velocity_tracking"): [0.4]}
+    write_record(tmp_path, "sac/a1_seed0", method="sac", robot="a1", seed=0, costs=costs,
+                 factors={"high_level_frames": 2000}, overrides=["sac.total_frames=2000"])
+    write_record(tmp_path, "sac_sac/a1_seed0", method="sac_sac", robot="a1", seed=0, costs=costs,
+                 factors={"high_level_frames": 10000})
+    write_record(tmp_path, "sac_sac_2x512/a1_seed0", method="sac_sac", robot="a1", seed=0, costs=costs,
+                 factors={"high_level_frames": 10000}, overrides=["low_level.hidden=512"])
+    runs = read_records(tmp_path)
+    assert {(r.method, r.task, r.factor("high_level_frames")) for r in runs} == {
+        (m, t, frames) for m, frames in (("sac", 2000), ("sac_sac", 10000), ("sac_sac_2x512", 10000))
+        for t in ("goal_reaching", "velocity_tracking")}
+    assert {r.options for r in runs if r.method == "sac_sac_2x512"} == {()}  # the variant's override is its name
 
 
 def test_seed_values_pool_a_seeds_runs_and_count_a_repeated_run_once(tmp_path):

@@ -197,6 +197,9 @@ def test_power_grows_with_seeds_and_seeds_needed_decides():
     assert decide_close(close_a, close_b).verdict == INCONCLUSIVE
     needed = seeds_needed(close_a, close_b, kind="close")
     assert needed is not None and needed > 3 and power(close_a, close_b, needed, kind="close") >= 0.8
+    # one seed on a side: no spread to estimate a power from, said rather than guessed
+    with pytest.raises(ValueError, match="at least 2 seeds per side"):
+        seeds_needed([0.2], [0.5, 0.6, 0.55])
 
 
 def test_the_example_of_docs_statistics_runs_as_printed(capsys):

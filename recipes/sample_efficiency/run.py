@@ -112,32 +112,48 @@ def seed_curves(rows: list[dict], tasks) -> list[dict]:
     return curves
 
 
-def check_claims(curves: list[dict], full: int) -> list[dict]:
-    """The two claims per robot, task and budget, each with its test's decision (:mod:`hierloco.stats`)."""
-    from hierloco.stats import decide_better, decide_close
+def check_claims(curves: list[dict], full: int) -> list:
+    """The two claims per robot, task and budget (:class:`recipes.compare.paper_check.Check`, keys
+    ``sample_efficient`` and ``saturates``), each decided by its test over seeds (:mod:`hierloco.stats`)."""
+    from recipes.compare.paper_check import decided, part
 
     def values(robot, method, task, samples):
         return [c["cost"] for c in curves if (c["robot"], c["method"], c["task"], c["samples_per_task"]) ==
                 (robot, method, task, samples)]
 
+    def check(key, claim, robot, task, a, b, kind, names):
+        ours = f"{names[0]} {np.mean(a):.3f} (n={len(a)}), {names[1]} {np.mean(b):.3f} (n={len(b)})"
+        return decided(key, claim, robot, "normal", task, ours, "-", [part(claim, a, b, kind, names=names)],
+                       "Sec. I, III-C, IV-B")
+
     claims = []
     for robot, task in sorted({(c["robot"], c["task"]) for c in curves}):
-        lat = sorted({c["samples_per_task"] for c in curves if (c["robot"], c["method"], c["task"]) ==
-                      (robot, "lat", task)})
-        sac = sorted({c["samples_per_task"] for c in curves if (c["robot"], c["method"], c["task"]) ==
-                      (robot, "sac", task)})
-        for samples in sorted(set(lat) & set(sac)):
-            a, b = values(robot, "lat", task, samples), values(robot, "sac", task, samples)
-            claims.append({"robot": robot, "task": task, "claim": f"LAT with {samples} samples in all is better than "
-                           f"SAC with {samples} per task", "a": a, "b": b, "decision": decide_better(a, b)})
-        for samples in (s for s in lat if s < full):
-            a, b = values(robot, "lat", task, samples), values(robot, "lat", task, full)
-            claims.append({"robot": robot, "task": task, "claim": f"LAT with {samples} samples is close to LAT with "
-                           f"{full}", "a": a, "b": b, "decision": decide_close(a, b)})
+        budgets = {m: sorted({c["samples_per_task"] for c in curves if (c["robot"], c["method"], c["task"]) ==
+                              (robot, m, task)}) for m in ("lat", "sac")}
+        for samples in sorted(set(budgets["lat"]) & set(budgets["sac"])):
+            claims.append(check("sample_efficient", f"LAT with {samples} samples in all is better than SAC with "
+                                f"{samples} per task", robot, task, values(robot, "lat", task, samples),
+                                values(robot, "sac", task, samples), "better", (f"lat:{samples}", f"sac:{samples}")))
+        if full in budgets["lat"]:
+            for samples in (s for s in budgets["lat"] if s < full):
+                claims.append(check("saturates", f"LAT with {samples} samples is close to LAT with {full}", robot,
+                                    task, values(robot, "lat", task, samples), values(robot, "lat", task, full),
+                                    "close", (f"lat:{samples}", f"lat:{full}")))
     return claims
 
 
-def claims_markdown(claims: list[dict], *, title: str) -> str:
+def curves_of(runs, tasks) -> list[dict]:
+    """:func:`seed_curves`'s rows from job records' runs (:func:`hierloco.evidence.read_records`): each LAT run's
+    budget is its CoM transitions, each SAC run's its high level's steps per task (both from the stage keys)."""
+    from hierloco.evidence import rows_of
+
+    budget = {"lat": "num_transitions", "sac": "high_level_frames"}
+    chosen = [r for r in runs if r.method in budget and r.factor(budget[r.method]) is not None]
+    rows = [{**row, "samples": run.factor(budget[run.method])} for run in chosen for row in rows_of([run])]
+    return seed_curves(rows, tasks)
+
+
+def claims_markdown(claims: list, *, title: str) -> str:
     lines = [f"# Sample efficiency: the claims ({title})", "",
              "Each claim decided over seeds (each seed's mean normalised cost over its episodes; Welch's t interval, "
              "alpha 0.05; \"better\": at least 10 % and 0.01 lower; \"close\": within 20 % or 0.01; "
@@ -147,9 +163,9 @@ def claims_markdown(claims: list[dict], *, title: str) -> str:
              "| robot | task | claim | first (mean over seeds) | second | verdict and test |",
              "|---|---|---|---|---|---|"]
     for c in claims:
-        d = c["decision"]
-        lines.append(f"| {c['robot']} | {c['task'].replace('_', ' ')} | {c['claim']} | {np.mean(c['a']):.3f} "
-                     f"(n={len(c['a'])}) | {np.mean(c['b']):.3f} (n={len(c['b'])}) | {d.text()} |")
+        a, b = c.parts[0].a, c.parts[0].b
+        lines.append(f"| {c.robot} | {c.task.replace('_', ' ')} | {c.claim} | {np.mean(a):.3f} (n={len(a)}) | "
+                     f"{np.mean(b):.3f} (n={len(b)}) | {c.parts[0].decision.text()} |")
     return "\n".join(lines) + "\n"
 
 

@@ -44,8 +44,10 @@ from recipes.compare.paper_check import NOT_MEASURED, TASKS, Check, counts_line
 
 COMMAND = "python -m recipes.verdicts"
 ROOT = Path(__file__).resolve().parents[2]
-# the paper preset's sizes (docs/index.md): a run with other values is another configuration
+# the paper preset's sizes (docs/index.md): a run with other values is another configuration; the ablations vary
+# LAT's, the sample-efficiency study also SAC's high-level steps per task
 DEFAULTS = {"latent_dim": 3, "num_experts": 50, "num_transitions": 10000}
+PAPER_SIZES = {**DEFAULTS, "high_level_frames": 10000}
 FALLBACK_TUNED_IK = {"a1": "ik", "daisy": "ik_plain"}
 
 
@@ -76,6 +78,9 @@ STUDIES = (
     Study("ablations/no_turn", ("ablations/no_turn/records",),
           command="python recipes/ablations/run.py trials=3 run=[latent_dim] 'ablations.latent_dim.values=[2,3]' "
                   "(experts that do not turn)"),
+    Study("sample_efficiency", ("sample_efficiency/records",),
+          command="python recipes/sample_efficiency/run.py records=results/sample_efficiency/records "
+                  "out_dir=results/sample_efficiency"),
 )
 # comparison tables of earlier runs of compare_full's study, kept without records (per-episode rows only): declared
 # the same configurations as compare_full's records with the same labels (hierloco.evidence.adopt_configs)
@@ -114,7 +119,7 @@ def paper_configuration(run: Run) -> bool:
     factor a method does not have is no difference)."""
     factors = dict(run.factors)
     return (run.profile == "own" and "command_low" not in factors
-            and all(factors.get(name, value) == value for name, value in DEFAULTS.items()))
+            and all(factors.get(name, value) == value for name, value in PAPER_SIZES.items()))
 
 
 def _wallclock(path: Path) -> dict:
@@ -434,6 +439,10 @@ def _figure_claims():
         ("sample-efficient: tasks solved \"with only 2000 hardware samples\" (ours: after damage, the dynamics "
          "re-learned from 2000 samples against 10,000)", "Abstract; Sec. IV-D; Sec. VI", "-",
          ("adverse", "samples", "2000")),
+        ("\"this model-based planner outperforms model-free approaches ... in sample-efficiency\"; SAC is "
+         "\"re-trained for new tasks, hence using 3 times as much data\" (ours: LAT with N CoM transitions in all "
+         "against SAC with N high-level steps per task, at N = 2000, 5000 and the comparison's 10,000)",
+         "Sec. I; Sec. III-C; Sec. IV-B", "-", ("sample_efficiency", "sample_efficient")),
     ]
 
 
@@ -453,10 +462,6 @@ NOT_MEASURED_YET = [
     ("\"Our method can directly be used with waypoint navigation methods to reach a desired goal\"",
      "Sec. I; Fig. 2", "a navigation study with records over several arenas and seeds (`navigation/`: one arena, "
      "seed 0, A1 and Daisy reach the goal within 0.03 m; no test over arenas and seeds yet)"),
-    ("\"this model-based planner outperforms model-free approaches ... in sample-efficiency\"", "Sec. III-C",
-     "a learning-curve study: SAC and SAC-SAC cost against the high-level samples they are given, at and below "
-     "LAT's 10,000, on both robots (`recipes/sample_efficiency/run.py`, LAT against SAC: running, "
-     "`sample_efficiency/`)"),
     ("the same results on the real Daisy (Fig. 8, 10a)", "Sec. IV-D",
      "a real robot: the hardware studies here perturb a simulated copy (mass, motors, friction, latency, CoM "
      "noise), which is what they measure"),
@@ -522,10 +527,23 @@ def design_counts(evidence: Evidence) -> list[str]:
     return lines
 
 
+def sample_efficiency_checks(evidence: Evidence) -> list[Check]:
+    """The sample-efficiency study's claims (:func:`recipes.sample_efficiency.run.check_claims`) on its records, its
+    full budgets being the comparison's LAT and SAC runs of the paper's configuration for the seeds it ran (as the
+    study itself takes them, from the comparison's records)."""
+    from recipes.sample_efficiency.run import check_claims, curves_of
+
+    own = evidence.runs.get("sample_efficiency", [])
+    seeds = {(r.robot, r.seed) for r in own}
+    full = [r for r in evidence.runs.get("compare_full", []) if r.method in ("lat", "sac") and r.setting == "normal"
+            and (r.robot, r.seed) in seeds and r.config and paper_configuration(r)]
+    return check_claims(curves_of(own + full, TASKS), DEFAULTS["num_transitions"]) if own else []
+
+
 def paper_checks(evidence: Evidence) -> dict[str, list[Check]]:
     """The checks that decide the paper's claims: the comparison on the pooled runs of the paper's configurations;
     the ablations with their default runs pooled with the same configurations' runs elsewhere; the hardware and
-    damage studies on their own runs."""
+    damage studies on their own runs; the sample-efficiency study on its runs and the comparison's."""
     pooled = evidence.pooled()
     out = {"pooled": compare_check.check_claims(rows_of(pooled), tuned_ik())}
     extra = [r for r in pooled if (r.method, r.robot, r.setting) == ("lat", "daisy", "normal")
@@ -538,6 +556,7 @@ def paper_checks(evidence: Evidence) -> dict[str, list[Check]]:
                        for c in hardware_checks(evidence.runs[name])]
     if "adverse" in evidence.runs:
         out["adverse"] = adverse_checks(evidence.runs["adverse"], evidence.findings.get("adverse", []))
+    out["sample_efficiency"] = sample_efficiency_checks(evidence)
     return out
 
 
@@ -555,7 +574,11 @@ def paper_claims(checks: dict[str, list[Check]]) -> list[tuple]:
 def _folder_of(source: str, check: Check) -> str:
     if source == "hardware":
         return f"hardware_{check.robot}"
-    return {"pooled": "pooled", "ablations": "ablations", "adverse": "adverse"}[source]
+    if source == "sample_efficiency" and any(name.endswith(f":{DEFAULTS['num_transitions']}")
+                                             for part in check.parts for name in part.names):
+        return "compare_full"   # the full budgets are the comparison's runs (sample_efficiency_checks)
+    return {"pooled": "pooled", "ablations": "ablations", "adverse": "adverse",
+            "sample_efficiency": "sample_efficiency"}[source]
 
 
 def paper_page(evidence: Evidence, checks: dict[str, list[Check]]) -> str:
@@ -636,7 +659,7 @@ def _identity(check: Check) -> tuple:
 @dataclass
 class Need:
     """The seeds that would decide a check: ``needed`` per method (``None`` when no count up to 100 reaches the
-    power), ``sides`` the configurations compared with their seeds now, ``(name, seeds)``; ``study`` where its
+    power, or when ``spread_unknown``: a side measured on one seed, so no power can be estimated), ``sides`` the configurations compared with their seeds now, ``(name, seeds)``; ``study`` where its
     runs are (``pooled`` for the comparison's pooled runs), ``section`` whether it is a claim of the paper or one of
     the damage study's own, and why it is listed."""
 
@@ -646,6 +669,7 @@ class Need:
     sides: list = field(default_factory=list)
     reason: str = ""
     section: str = "paper"
+    spread_unknown: bool = False
 
 
 def seeds_for(check: Check, study: str, reason: str, section: str = "paper") -> Need:
@@ -655,6 +679,13 @@ def seeds_for(check: Check, study: str, reason: str, section: str = "paper") -> 
     undecided = [p for p in check.parts if p.decision.verdict == stats.INCONCLUSIVE] or list(check.parts)
     undecided = [p for p in undecided if p.decision.verdict != stats.NOT_TESTABLE]
     counts, refuting = [], []
+    sides = []
+    for part in undecided:
+        for name, values in zip(part.names, (part.a, part.b)):
+            if np.ndim(values) and name not in [s[0] for s in sides]:
+                sides.append((name, len(values)))
+    if any(np.ndim(v) and len(v) < 2 for part in undecided for v in (part.a, part.b)):
+        return Need(check, study, None, sides, reason, section, spread_unknown=True)
     for part in undecided:
         n = stats.seeds_needed(part.a, part.b, kind=part.kind, paired=part.paired)
         counts.append(n)
@@ -667,11 +698,6 @@ def seeds_for(check: Check, study: str, reason: str, section: str = "paper") -> 
         needed = max(counts)
     else:
         needed = None
-    sides = []
-    for part in undecided:
-        for name, values in zip(part.names, (part.a, part.b)):
-            if np.ndim(values) and name not in [s[0] for s in sides]:
-                sides.append((name, len(values)))
     return Need(check, study, needed, sides, reason, section)
 
 
@@ -700,6 +726,12 @@ def job_of(evidence: Evidence, study: str, robot: str, name: str) -> tuple[tuple
         if not minutes and (method, robot) in evidence.compute_tables.get(study, {}):
             minutes = [evidence.compute_tables[study][(method, robot)]]
         return ("hardware", study, method), f"{method} hardware job", minutes
+    if study == "sample_efficiency":
+        budget = {"lat": "num_transitions", "sac": "high_level_frames"}[method]
+        runs = [r for r in evidence.runs.get(study, []) + evidence.runs.get("compare_full", [])
+                if r.method == method and r.robot == robot and r.setting == "normal"
+                and r.factor(budget) == int(rest)]
+        return (study, method, int(rest)), f"{method} with {rest} samples (per task)", _minutes(runs)
     setting, _, profile = rest.partition(":")
     profile = profile or "own"
     adverse = evidence.runs.get("adverse", [])
@@ -750,6 +782,8 @@ def fragile(evidence: Evidence, checks: dict[str, list[Check]]) -> tuple[list[Ne
 
 
 def _seeds_text(need: Need) -> str:
+    if need.spread_unknown:
+        return "unknown (a side has one seed: no spread measured)"
     return "more than 100" if need.needed is None else f"{need.needed} per method"
 
 

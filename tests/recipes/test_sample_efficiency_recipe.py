@@ -46,7 +46,7 @@ def test_the_claims_compare_equal_budgets_and_the_saturation(tmp_path):
     curves = [*curve("lat", 1000, [0.30, 0.32, 0.31]), *curve("lat", 2000, [0.20, 0.21, 0.19]),
               *curve("lat", 10000, [0.20, 0.20, 0.21]), *curve("sac", 2000, [0.60, 0.62, 0.58]),
               *curve("sac", 10000, [0.19, 0.21, 0.20])]
-    claims = {c["claim"]: c["decision"].verdict for c in check_claims(curves, 10000)}
+    claims = {c.claim: c.verdict for c in check_claims(curves, 10000)}
     assert claims == {
         "LAT with 2000 samples in all is better than SAC with 2000 per task": "holds",
         "LAT with 10000 samples in all is better than SAC with 10000 per task": "does not hold",

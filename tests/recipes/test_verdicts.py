@@ -66,3 +66,28 @@ def test_the_files_are_regenerated_and_checked(tmp_path, capsys):
     assert (results / "paper_check.md").is_file() and (results / "compare_full" / "verdicts.md").is_file()
     assert main(["--results", str(results), "--check"]) == 0
     assert main(["--results", str(tmp_path / "missing")]) == 2
+
+
+def test_the_sample_efficiency_claim_is_decided_from_its_records_and_the_comparisons(tmp_path):
+    """The sample-efficiency study's records (smaller budgets) and the comparison's LAT and SAC runs (the full
+    budgets, for the seeds the study ran) decide "LAT with N samples in all beats SAC with N per task"."""
+    results = results_tree(tmp_path / "results")
+    budgets = {("lat", 2000): (0.13, 0.09, 0.012), ("sac", 2000): (0.70, 0.15, 0.070),
+               ("sac", 10000): (0.60, 0.06, 0.010)}
+    for (method, samples), costs in budgets.items():
+        factor = {"num_transitions" if method == "lat" else "high_level_frames": samples}
+        for seed in range(3):
+            where = (results / "compare_full" / "records", f"sac/paper/a1_seed{seed}") if samples == 10000 else (
+                results / "sample_efficiency" / "records", f"a1_seed{seed}/{method}_{samples}")
+            write_record(*where, method=method, robot="a1", seed=seed, factors=factor,
+                         overrides=[f"sac.total_frames={samples}"] if samples != 10000 else [],
+                         costs={("normal", t): [c + 0.005 * seed] for t, c in zip(TASKS, costs)})
+    paper = pages(load(results))["paper_check.md"]
+    section = paper[paper.index("sample-efficiency"):]
+    lines = {line.split(" | ")[3] + " | " + line.split(" | ")[2]: line for line in section.splitlines()
+             if line.startswith("| a1 | normal |")}
+    assert "**holds**" in lines["LAT with 2000 samples in all is better than SAC with 2000 per task | velocity_tracking"]
+    assert "**holds**" in lines["LAT with 2000 samples in all is better than SAC with 2000 per task | "
+                                "trajectory_tracking"]
+    same = lines["LAT with 10000 samples in all is better than SAC with 10000 per task | goal_reaching"]
+    assert "**does not hold**" in same and "lat:10000 0.100 (n=3; compare_full)" in same  # COSTS: 0.09 + 0.01 * seed
