@@ -225,12 +225,12 @@ def plot_samples(rows: Sequence[dict], path: str | os.PathLike, *, tasks: Sequen
                 ax.errorbar(points, [np.mean(v) for v in values], yerr=[np.std(v) for v in values], fmt=style,
                             capsize=3, label=f"{method.upper()} {task.replace('_', ' ')}")
         ax.set_xscale("log")
-        ax.set_xlabel(xlabel)
         ax.set_ylabel("normalised cost (lower is better)")
         ax.axhline(1.0, color="k", lw=0.8, ls=":")
         ax.set_title(robot)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
+    fig.supxlabel(xlabel)   # one label under all panels (a long one would overlap its neighbour's)
     fig.suptitle(title or "cost against dynamics samples")
     save_figure(fig, path)
 
