@@ -14,6 +14,7 @@ claim that does not hold with the cause we checked, from the YAML file ``causes`
 
 import hierloco  # noqa: F401  (first: the rendering backend is chosen before anything loads MuJoCo)
 
+from collections.abc import Mapping
 from pathlib import Path
 
 from omegaconf import OmegaConf
@@ -55,11 +56,35 @@ def check(cfg) -> list:
             paper_check.load_causes(cfg.causes)
         except ValueError as error:
             problems.append(str(error))
+    problems += name_problems(cfg.names, cfg.methods)
     if not isinstance(cfg.generalization, bool):
         problems.append(f"generalization must be true or false, got {cfg.generalization!r}")
     if problems:
         raise ConfigError("bad config: " + "; ".join(problems))
     return robots
+
+
+def name_problems(names, methods) -> list[str]:
+    """What is wrong with a ``names`` mapping (method -> its name in the tables and claims): two of the methods
+    (``methods`` and the ones it names) under one name would be pooled as one.
+
+        >>> name_problems({"sac_sac_2x512": "sac_sac", "sac_sac": "sac_sac_2x256"}, ["lat", "sac_sac"])
+        []
+        >>> name_problems({"sac_sac_2x512": "sac_sac"}, ["sac_sac"])
+        ["names: two methods would be shown as 'sac_sac'"]
+    """
+    if not isinstance(names, Mapping):
+        return [f"names must be a mapping of method to name, got {names!r}"]
+    problems = [f"names.{m}: {n!r} is not a name" for m, n in names.items() if not (isinstance(n, str) and n)]
+    shown = [names.get(m, m) for m in dict.fromkeys([*methods, *names])]
+    problems += [f"names: two methods would be shown as {n!r}" for n in sorted({n for n in shown
+                                                                                  if shown.count(n) > 1})]
+    return problems
+
+
+def renamed(rows: list[dict], names) -> list[dict]:
+    """``rows`` with each method under its name in the tables and claims (``names``: method -> name)."""
+    return [{**row, "method": names.get(row["method"], row["method"])} for row in rows] if names else rows
 
 
 def seeds_of(cfg, method: str) -> list[int]:
@@ -104,7 +129,7 @@ def comparison_job(method: str, spec, seed: int, *, preset: str, settings, recip
 def main(cfg) -> None:
     robots = check(cfg)
     results = run_study(cfg, jobs(cfg, robots))
-    rows = rows_of(results)
+    rows = renamed(rows_of(results), OmegaConf.to_container(cfg.names))
     title = f"Normalised cost ({cfg.preset_name} preset, {seeds_text(cfg)})"
     out = Path(cfg.out_dir)
     table = write_tables(rows, results, out, name="comparison", title=title, settings=cfg.settings,

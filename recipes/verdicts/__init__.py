@@ -28,7 +28,7 @@ from __future__ import annotations
 import math
 import re
 from collections import defaultdict
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -131,10 +131,12 @@ def _wallclock(path: Path) -> dict:
     return table
 
 
-def load(results: Path) -> Evidence:
-    """Reads every study of :data:`STUDIES` and the archived tables under ``results``."""
+def load(results: Path, names: dict | None = None) -> Evidence:
+    """Reads every study of :data:`STUDIES` and the archived tables under ``results``, each run's method under its
+    name in the tables and claims (``names``: method -> name; default :func:`method_names`)."""
     results = Path(results)
     evidence = Evidence(results)
+    names = method_names() if names is None else dict(names)
     for study in STUDIES:
         found = next((p for p in (locate(results, r) for r in study.records) if p is not None), None)
         if found is not None:
@@ -155,6 +157,10 @@ def load(results: Path) -> Evidence:
         if table is not None:
             evidence.archived += adopt_configs(read_table(table, folder=name), reference)
             evidence.sources[name] = _shown(table, results) + " (archived table: same configuration as compare_full)"
+    if names:
+        evidence.runs = {study: [replace(r, method=names.get(r.method, r.method)) for r in runs]
+                         for study, runs in evidence.runs.items()}
+        evidence.archived = [replace(r, method=names.get(r.method, r.method)) for r in evidence.archived]
     return evidence
 
 
@@ -165,14 +171,22 @@ def _shown(path: Path, results: Path) -> str:
         return path.as_posix()
 
 
+def _compare_config(key: str):
+    path = ROOT / "recipes" / "compare" / "config.yaml"
+    return (yaml.safe_load(path.read_text()) or {}).get(key) if path.is_file() else None
+
+
 def tuned_ik() -> dict:
     """The IK law tuned on the training targets per robot: ``tuned_ik`` of the comparison's config."""
-    for path in (ROOT / "recipes" / "compare" / "config.yaml",):
-        if path.is_file():
-            found = (yaml.safe_load(path.read_text()) or {}).get("tuned_ik")
-            if isinstance(found, dict):
-                return found
-    return dict(FALLBACK_TUNED_IK)
+    found = _compare_config("tuned_ik")
+    return found if isinstance(found, dict) else dict(FALLBACK_TUNED_IK)
+
+
+def method_names() -> dict:
+    """Each method's name in the tables and claims where it is not its own: ``names`` of the comparison's config
+    (say SAC-SAC at the paper's 2 x 512 named ``sac_sac``, the 2 x 256 runs ``sac_sac_2x256``)."""
+    found = _compare_config("names")
+    return dict(found) if isinstance(found, dict) else {}
 
 
 # --- the claims of each study --------------------------------------------------------------------------------------

@@ -211,3 +211,19 @@ def test_a_bad_causes_file_is_refused_before_any_job(tmp_path):
         run.check(compare_config("robots=[a1]", f"causes={tmp_path / 'missing.yaml'}"))
     causes.write_text("- {claims: [lib_worse], cause: because}")
     assert run.check(compare_config("robots=[a1]", f"causes={causes}"))[0].name == "a1"
+
+
+def test_names_show_a_variant_under_the_methods_name_and_refuse_two_under_one():
+    """``names`` puts SAC-SAC at the paper's 2 x 512 in the tables and claims as ``sac_sac`` (the 2 x 256 runs as a
+    labelled variant); two methods under one name would be pooled as one, so that is refused before any job."""
+    from hierloco.pipeline.config import ConfigError
+    from recipes.compare import run
+
+    swap = "+names={sac_sac_2x512: sac_sac, sac_sac: sac_sac_2x256}"
+    cfg = compare_config("methods=[sac_sac,sac_sac_2x512]", "robots=[a1]", swap)
+    run.check(cfg)
+    rows = [{"method": m, "normalized_cost": c} for m, c in (("sac_sac", 0.9), ("sac_sac_2x512", 0.5), ("lat", 0.1))]
+    assert [(r["method"], r["normalized_cost"]) for r in run.renamed(rows, dict(cfg.names))] == [
+        ("sac_sac_2x256", 0.9), ("sac_sac", 0.5), ("lat", 0.1)]
+    with pytest.raises(ConfigError, match="two methods would be shown as 'sac_sac'"):
+        run.check(compare_config("methods=[sac_sac,sac_sac_2x512]", "robots=[a1]", "+names={sac_sac_2x512: sac_sac}"))

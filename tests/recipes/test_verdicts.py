@@ -91,3 +91,25 @@ def test_the_sample_efficiency_claim_is_decided_from_its_records_and_the_compari
                                 "trajectory_tracking"]
     same = lines["LAT with 10000 samples in all is better than SAC with 10000 per task | goal_reaching"]
     assert "**does not hold**" in same and "lat:10000 0.100 (n=3; compare_full)" in same  # COSTS: 0.09 + 0.01 * seed
+
+
+def test_names_make_the_2x512_sac_sac_the_one_the_claims_are_about(tmp_path):
+    """With ``names`` (the comparison's config) the SAC-SAC runs at the paper's 2 x 512 are ``sac_sac`` in every
+    claim and the 2 x 256 runs a labelled variant the claims do not use; without it, the 2 x 512 runs are their own
+    method and never replicates of the 2 x 256 ones."""
+    results = results_tree(tmp_path / "results")
+    jobs = results / "compare_full" / "records"
+    for name, overrides, cost in (("sac_sac", [], 0.90), ("sac_sac_2x512", ["low_level.hidden=512"], 0.30)):
+        for seed in range(3):
+            write_record(jobs, f"{name}/paper/a1_seed{seed}", method=name, recipe_method="sac_sac", robot="a1",
+                         seed=seed, overrides=overrides, factors={"high_level_frames": 10000},
+                         costs={("normal", t): [cost + 0.01 * seed] for t in TASKS})
+
+    def learned_best(names):
+        paper = pages(load(results, names=names))["paper_check.md"]
+        return next(line for line in paper.splitlines() if line.startswith("| a1 | normal | velocity_tracking |")
+                    and "LAT is best among the learned methods" in line)
+
+    assert "sac_sac:normal 0.910 (n=3" in learned_best({})  # the 2 x 256 runs
+    swapped = learned_best({"sac_sac_2x512": "sac_sac", "sac_sac": "sac_sac_2x256"})
+    assert "sac_sac:normal 0.310 (n=3" in swapped and "sac_sac_2x256" not in swapped
