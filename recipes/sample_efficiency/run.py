@@ -33,6 +33,11 @@ from hierloco.pipeline.study import (
 from recipes.compare.run import comparison_job
 
 
+# each method's budget as a factor of its records' runs (hierloco.evidence.read_records): LAT's CoM transitions, SAC's
+# high-level steps per task
+BUDGET = {"lat": "num_transitions", "sac": "high_level_frames"}
+
+
 def budgets(cfg) -> tuple[int, int, int]:
     """The preset's own budgets: LAT's dynamics transitions, SAC's high-level steps per task, SAC's random start."""
     from hierloco.pipeline.config import compose_recipe
@@ -147,9 +152,8 @@ def curves_of(runs, tasks) -> list[dict]:
     budget is its CoM transitions, each SAC run's its high level's steps per task (both from the stage keys)."""
     from hierloco.evidence import rows_of
 
-    budget = {"lat": "num_transitions", "sac": "high_level_frames"}
-    chosen = [r for r in runs if r.method in budget and r.factor(budget[r.method]) is not None]
-    rows = [{**row, "samples": run.factor(budget[run.method])} for run in chosen for row in rows_of([run])]
+    chosen = [r for r in runs if r.method in BUDGET and r.factor(BUDGET[r.method]) is not None]
+    rows = [{**row, "samples": run.factor(BUDGET[run.method])} for run in chosen for row in rows_of([run])]
     return seed_curves(rows, tasks)
 
 

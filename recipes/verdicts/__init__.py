@@ -673,9 +673,10 @@ def _identity(check: Check) -> tuple:
 @dataclass
 class Need:
     """The seeds that would decide a check: ``needed`` per method (``None`` when no count up to 100 reaches the
-    power, or when ``spread_unknown``: a side measured on one seed, so no power can be estimated), ``sides`` the configurations compared with their seeds now, ``(name, seeds)``; ``study`` where its
-    runs are (``pooled`` for the comparison's pooled runs), ``section`` whether it is a claim of the paper or one of
-    the damage study's own, and why it is listed."""
+    power, or when ``spread_unknown``: a side measured on one seed, so no power can be estimated), ``sides`` the
+    configurations compared with their seeds now, ``(name, seeds)``; ``study`` where its runs are (``pooled`` for
+    the comparison's pooled runs), ``section`` whether it is a claim of the paper or one of the damage study's own,
+    and why it is listed."""
 
     check: Check
     study: str
@@ -741,7 +742,9 @@ def job_of(evidence: Evidence, study: str, robot: str, name: str) -> tuple[tuple
             minutes = [evidence.compute_tables[study][(method, robot)]]
         return ("hardware", study, method), f"{method} hardware job", minutes
     if study == "sample_efficiency":
-        budget = {"lat": "num_transitions", "sac": "high_level_frames"}[method]
+        from recipes.sample_efficiency.run import BUDGET
+
+        budget = BUDGET[method]
         runs = [r for r in evidence.runs.get(study, []) + evidence.runs.get("compare_full", [])
                 if r.method == method and r.robot == robot and r.setting == "normal"
                 and r.factor(budget) == int(rest)]

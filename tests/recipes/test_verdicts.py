@@ -86,7 +86,8 @@ def test_the_sample_efficiency_claim_is_decided_from_its_records_and_the_compari
     section = paper[paper.index("sample-efficiency"):]
     lines = {line.split(" | ")[3] + " | " + line.split(" | ")[2]: line for line in section.splitlines()
              if line.startswith("| a1 | normal |")}
-    assert "**holds**" in lines["LAT with 2000 samples in all is better than SAC with 2000 per task | velocity_tracking"]
+    assert "**holds**" in lines["LAT with 2000 samples in all is better than SAC with 2000 per task | "
+                                "velocity_tracking"]
     assert "**holds**" in lines["LAT with 2000 samples in all is better than SAC with 2000 per task | "
                                 "trajectory_tracking"]
     same = lines["LAT with 10000 samples in all is better than SAC with 10000 per task | goal_reaching"]
