@@ -114,7 +114,11 @@ def task_env(low_level, task: Task, num_robots: int, seed: int, nthread: int | N
 
 def train_high_level(run, params, make_low_level) -> SACAgent:
     """Goal-conditioned SAC (TorchRL's ``SACLoss``, :func:`hierloco.components.sac.train_sac`) on the training half
-    of a task's targets, ``total_frames`` high-level actions collected on ``num_robots`` robots at once."""
+    of a task's targets, ``total_frames`` high-level actions collected on ``num_robots`` robots at once.
+
+    Checkpointed as it trains (``sac_<task>.training.pt`` in the run directory, every tenth of ``total_frames``), so
+    a killed run resumes from its last checkpoint (a checkpoint of other parameters is refused); the checkpoint is
+    removed once the agent is trained."""
     from hierloco.components.sac import SACAgent, train_sac
     from hierloco.envs.transforms import GoalObservation
 
@@ -124,6 +128,7 @@ def train_high_level(run, params, make_low_level) -> SACAgent:
                            lr=params["lr"], gamma=params["gamma"], tau=params["tau"], seed=params["seed"],
                            device=params["device"], compile_update=params.get("compile", False))
     env = task_env(low_level, task, params["num_robots"], params["seed"], nthread=run.nthread)
+    checkpoint = run.path / f"sac_{params['task_name']}.training.pt"
     try:
         agent.metadata = train_sac(env, agent, total_frames=params["total_frames"],
                                    init_random_frames=params["init_random_frames"],
@@ -131,9 +136,12 @@ def train_high_level(run, params, make_low_level) -> SACAgent:
                                    buffer_size=params["buffer_size"], log_every=max(params["num_robots"],
                                                                                     params["total_frames"] // 20),
                                    seed=params["seed"], progress=run.progress, logger=run.logger,
-                                   tag=f"sac_{params['task_name']}")
+                                   tag=f"sac_{params['task_name']}", checkpoint_path=checkpoint,
+                                   checkpoint_every=max(params["num_robots"], params["total_frames"] // 10),
+                                   settings=params)
     finally:
         env.close()
+    checkpoint.unlink(missing_ok=True)  # the training state (with its replay buffer) is not needed any more
     return agent
 
 

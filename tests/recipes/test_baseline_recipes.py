@@ -55,6 +55,7 @@ def test_baseline_recipe_runs(method, settings, tmp_path):
         assert {p.name for p in tmp_path.glob("sac_*.pt") if "low_level" not in p.name} == {f"sac_{t}.pt" for t in
                                                               ("velocity_tracking", "goal_reaching",
                                                                "trajectory_tracking")}
+        assert not list(tmp_path.glob("*.training.pt"))  # the training checkpoints go once their stage is built
     else:
         data = (tmp_path / "dynamics_data_normal.npz.key.json").read_text()
         assert ('"kind": "expert_replay"' in data) if method == "lib" else ('"kind": "command"' in data)
@@ -74,3 +75,48 @@ def test_sac_trains_on_half_the_targets_on_both_axes():
     assert np.allclose(velocity.velocities.numpy(), [[0.0, 0.2], [0.2, 0.0]]) and velocity.num_steps == 40
     path = TrajectoryTracking().training_split()
     assert abs(path.length - TrajectoryTracking().length / 2) < 0.05 and np.allclose(path.path[-1], [2.0, 0.0])
+
+
+class _KilledAt:
+    """A logger that records the frames it is told of and stops the training (as a kill would) at ``frames``."""
+
+    def __init__(self, frames=None):
+        self.frames, self.steps = frames, []
+
+    def log_metrics(self, metrics, step):
+        self.steps.append(step)
+        if self.frames is not None and step >= self.frames:
+            raise KeyboardInterrupt
+
+
+def test_a_killed_sac_high_level_resumes_from_its_checkpoint(tmp_path):
+    """SAC's high level (SAC's and SAC-SAC's) writes its training state as it trains: stopped half-way, it goes on
+    from its last checkpoint (nothing collected twice) to the full budget and removes the checkpoint; a checkpoint
+    of other parameters is refused."""
+    from types import SimpleNamespace
+
+    from hierloco.components.low_level import CommandLowLevel
+    from recipes.sac.utils import train_high_level
+
+    params = {"seed": 0, "device": "cpu", "task_name": "velocity_tracking", "task": {}, "total_frames": 64,
+              "init_random_frames": 16, "num_robots": 8, "updates_per_frame": 0.25, "batch_size": 16,
+              "buffer_size": 256, "hidden": 16, "lr": 1e-3, "gamma": 0.95, "tau": 0.005}
+    checkpoint = tmp_path / "sac_velocity_tracking.training.pt"
+
+    def train(logger, **changed):
+        run = SimpleNamespace(path=tmp_path, nthread=1, progress=False, logger=logger)
+        return train_high_level(run, {**params, **changed}, lambda n: CommandLowLevel("a1", n, steps_per_action=10))
+
+    with pytest.raises(KeyboardInterrupt):
+        train(_KilledAt(frames=32))
+    assert checkpoint.exists()  # written every tenth of the budget (here every step of 8 robots)
+    with pytest.raises(ValueError, match="other settings"):
+        train(_KilledAt(), lr=3e-4)
+    resumed = _KilledAt()
+    agent = train(resumed)
+    curve = agent.metadata["learning_curve"]
+    assert agent.metadata["frames"] == 64 and [p["frames"] for p in curve] == list(range(8, 65, 8))
+    # stopped while logging frame 32, before that step's checkpoint: it goes on from the checkpoint of frame 24
+    assert resumed.steps == list(range(32, 65, 8))
+    assert agent.updates == 7 * 2  # 2 updates per step of 8 robots on the 7 steps from frame 16: none lost or redone
+    assert not checkpoint.exists()
