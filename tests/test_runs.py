@@ -75,6 +75,25 @@ def test_a_build_s_wall_clock_is_recorded_and_reported_when_reused(tmp_path):
     assert set(json.loads((tmp_path / "builds.json").read_text())) == {"slow"}, "a failed build records nothing"
 
 
+def test_a_resumed_build_counts_the_time_of_the_builds_killed_before_it(tmp_path):
+    """A build that resumed from its checkpoint adds what the killed builds took: builds.json holds the whole time
+    and that part; the next stage's build starts from zero; a negative time is refused."""
+    run = RunDirectory(tmp_path)
+
+    def resumed():
+        run.count_interrupted_seconds(600.0)
+        return [1]
+
+    run.stage("resumed", CONFIG, resumed, Stage.save, Stage().load, "resumed.json")
+    run.stage("fresh", {"f": 1}, lambda: [2], Stage.save, Stage().load, "fresh.json")
+    builds = json.loads((tmp_path / "builds.json").read_text())
+    assert 600.0 <= builds["resumed"]["seconds"] < 605 and builds["resumed"]["interrupted_seconds"] == 600.0
+    assert builds["fresh"]["seconds"] < 5 and "interrupted_seconds" not in builds["fresh"]
+    assert run.build_seconds["resumed"] == pytest.approx(builds["resumed"]["seconds"], abs=1e-3)
+    with pytest.raises(ValueError, match=">= 0"):
+        run.count_interrupted_seconds(-1.0)
+
+
 def test_other_stages_are_independent(tmp_path):
     run = RunDirectory(tmp_path)
     first, second = Stage([1]), Stage([2])

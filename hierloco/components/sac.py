@@ -299,7 +299,8 @@ def train_sac(env: EnvBase, agent: SACAgent, *, total_frames: int, init_random_f
 
     Returns:
         ``frames``, ``updates``, ``train_seconds`` (wall-clock over all runs), ``seconds`` (this run's time in
-        ``collection`` and ``update``) and ``learning_curve``: every ``log_every`` frames, the ``frames``,
+        ``collection`` and ``update``; ``before_resume``: the earlier runs' time, 0 for a fresh start) and
+        ``learning_curve``: every ``log_every`` frames, the ``frames``,
         ``seconds``, ``updates``, the averaged diagnostics and the last loss terms.
     """
     for name, value in (("total_frames", total_frames), ("batch_size", batch_size), ("buffer_size", buffer_size),
@@ -347,7 +348,7 @@ def train_sac(env: EnvBase, agent: SACAgent, *, total_frames: int, init_random_f
 
     b = env.batch_size[0]
     start = time.perf_counter() - elapsed
-    seconds = {"collection": 0.0, "update": 0.0}
+    seconds = {"collection": 0.0, "update": 0.0, "before_resume": elapsed}
     sums: dict[str, float] = {}
     steps, info = 0, {}
     next_log = (frames // log_every + 1) * log_every

@@ -193,6 +193,7 @@ class RunDirectory:
         self.reused: dict[str, bool] = {}
         self.build_seconds: dict[str, float | None] = {}  # what building each stage took, when it was built
         self.current: str | None = None  # the stage being built or loaded
+        self._interrupted_seconds = 0.0  # what killed builds of the current stage took (count_interrupted_seconds)
         self._lock_fd: int | None = None
 
     # ------------------------------------------------------------------------------------------------ lock
@@ -266,7 +267,8 @@ class RunDirectory:
 
     # ------------------------------------------------------------------------------------------------ keys
     def builds(self) -> dict[str, dict]:
-        """``builds.json``: stage -> ``{"seconds", "threads", "host", "cpu", "finished"}`` of its last build (``{}`` if
+        """``builds.json``: stage -> ``{"seconds", "threads", "host", "cpu", "finished"}`` of its last build, with
+        ``interrupted_seconds`` where it resumed killed builds (:meth:`count_interrupted_seconds`) (``{}`` if
         none was recorded, as for runs made before it existed; ``cpu`` (:func:`cpu_description`) is missing in builds
         recorded before it was)."""
         try:
@@ -275,13 +277,23 @@ class RunDirectory:
             return {}
         return builds if isinstance(builds, dict) else {}
 
-    def _record_build(self, name: str, seconds: float) -> None:
+    def count_interrupted_seconds(self, seconds: float) -> None:
+        """Adds ``seconds`` that killed builds of the stage being built spent before this one resumed from their
+        checkpoint (a build that checkpoints knows it: :func:`hierloco.components.sac.train_sac` returns it as
+        ``seconds["before_resume"]``). The stage's ``builds.json`` entry then holds the whole build's time in
+        ``seconds`` and that part as ``interrupted_seconds``, so compute tables count a resumed stage in full."""
+        if not seconds >= 0:
+            raise ValueError(f"interrupted seconds must be >= 0, got {seconds}")
+        self._interrupted_seconds += float(seconds)
+
+    def _record_build(self, name: str, seconds: float, interrupted: float = 0.0) -> None:
         threads = os.environ.get("OMP_NUM_THREADS", "")
         threads = int(threads) if threads.strip().isdigit() else (
             len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count())
         builds = {**self.builds(), name: {"seconds": round(seconds, 3), "threads": threads, "host": socket.gethostname(),
                                           "cpu": cpu_description(),
-                                          "finished": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}}
+                                          "finished": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+                                          **({"interrupted_seconds": round(interrupted, 3)} if interrupted else {})}}
         write_text(self.path / BUILDS_NAME, json.dumps(builds, indent=1, sort_keys=True))
 
     def key_path(self, filename: str) -> Path:
@@ -342,11 +354,12 @@ class RunDirectory:
             if self.readonly:
                 raise ReadOnlyRunError(f"run directory {self.path} is read-only and stage {name!r} is not finished")
             write_text(self.key_path(filename), json.dumps(normalized(key), indent=2, sort_keys=True))
+            self._interrupted_seconds = 0.0
             result = build()
             save(result, artifact)
             self.reused[name] = False
-            self.build_seconds[name] = time.perf_counter() - start
-            self._record_build(name, self.build_seconds[name])
+            self.build_seconds[name] = time.perf_counter() - start + self._interrupted_seconds
+            self._record_build(name, self.build_seconds[name], self._interrupted_seconds)
         self.current = None
         self.timings[name] = time.perf_counter() - start
         return result

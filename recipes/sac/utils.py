@@ -141,6 +141,7 @@ def train_high_level(run, params, make_low_level) -> SACAgent:
                                    settings=params)
     finally:
         env.close()
+    run.dir.count_interrupted_seconds(agent.metadata["seconds"]["before_resume"])
     checkpoint.unlink(missing_ok=True)  # the training state (with its replay buffer) is not needed any more
     return agent
 

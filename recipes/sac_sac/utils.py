@@ -65,6 +65,7 @@ def build_low_level(run, params) -> TrainedSACLowLevel:
     trained = train_sac_low_level(run.robot, checkpoint_path=checkpoint, nthread=run.nthread, progress=run.progress,
                                   logger=run.logger, log_every=max(params["num_robots"], params["total_frames"] // 50),
                                   **params)
+    run.dir.count_interrupted_seconds(trained.metadata["seconds"]["before_resume"])
     checkpoint.unlink(missing_ok=True)  # the training state (with its replay buffer) is not needed any more
     return trained
 

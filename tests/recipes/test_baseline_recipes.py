@@ -96,6 +96,8 @@ def test_a_killed_sac_high_level_resumes_from_its_checkpoint(tmp_path):
     from types import SimpleNamespace
 
     from hierloco.components.low_level import CommandLowLevel
+    from hierloco.components.sac import SACAgent
+    from hierloco.pipeline.rundir import RunDirectory
     from recipes.sac.utils import train_high_level
 
     params = {"seed": 0, "device": "cpu", "task_name": "velocity_tracking", "task": {}, "total_frames": 64,
@@ -103,8 +105,10 @@ def test_a_killed_sac_high_level_resumes_from_its_checkpoint(tmp_path):
               "buffer_size": 256, "hidden": 16, "lr": 1e-3, "gamma": 0.95, "tau": 0.005}
     checkpoint = tmp_path / "sac_velocity_tracking.training.pt"
 
+    directory = RunDirectory(tmp_path)
+
     def train(logger, **changed):
-        run = SimpleNamespace(path=tmp_path, nthread=1, progress=False, logger=logger)
+        run = SimpleNamespace(path=tmp_path, dir=directory, nthread=1, progress=False, logger=logger)
         return train_high_level(run, {**params, **changed}, lambda n: CommandLowLevel("a1", n, steps_per_action=10))
 
     with pytest.raises(KeyboardInterrupt):
@@ -113,7 +117,10 @@ def test_a_killed_sac_high_level_resumes_from_its_checkpoint(tmp_path):
     with pytest.raises(ValueError, match="other settings"):
         train(_KilledAt(), lr=3e-4)
     resumed = _KilledAt()
-    agent = train(resumed)
+    agent = directory.stage("sac_velocity_tracking", params, lambda: train(resumed), lambda a, p: a.save(p),
+                            SACAgent.load, "sac_velocity_tracking.pt")
+    build = directory.builds()["sac_velocity_tracking"]  # the killed run's training time is counted
+    assert 0 < build["interrupted_seconds"] < build["seconds"]
     curve = agent.metadata["learning_curve"]
     assert agent.metadata["frames"] == 64 and [p["frames"] for p in curve] == list(range(8, 65, 8))
     # stopped while logging frame 32, before that step's checkpoint: it goes on from the checkpoint of frame 24
