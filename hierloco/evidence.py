@@ -83,6 +83,8 @@ class Run:
     options: tuple[str, ...] = ()
     success: tuple[float, ...] = field(default=(), compare=False)
     steps_to_goal: tuple[float, ...] = field(default=(), compare=False)
+    final_error: tuple[float, ...] = field(default=(), compare=False)  # m, per episode (goal or path end)
+    clearance: tuple[float, ...] = field(default=(), compare=False)  # m, a navigation episode's closest CoM to a box
 
     @property
     def cost(self) -> float:
@@ -159,6 +161,8 @@ def _runs_from_rows(rows: list[dict], **labels) -> list[Run]:
                         episodes=tuple((int(r["episode"]), _cost(r["normalized_cost"])) for r in members),
                         success=tuple(_float(r.get("success")) for r in members),
                         steps_to_goal=tuple(_float(r.get("steps_to_goal")) for r in members),
+                        final_error=tuple(_float(r.get("final_error")) for r in members),
+                        clearance=tuple(_float(r.get("clearance")) for r in members),
                         **fields, **run_labels))
     return runs
 

@@ -235,9 +235,11 @@ def plot_samples(rows: Sequence[dict], path: str | os.PathLike, *, tasks: Sequen
     save_figure(fig, path)
 
 
-def plot_navigation(arena, planned_path: np.ndarray, com_path: np.ndarray | None, path: str | os.PathLike, *,
-                    inflation: float | None = None, title: str | None = None) -> None:
-    """Top view of a navigation arena: obstacles (and their inflation), the planned path and the CoM path."""
+def plot_navigation(arena, planned_path: np.ndarray, com_paths, path: str | os.PathLike, *,
+                    inflation: float | None = None, title: str | None = None,
+                    labels: Sequence[str] | None = None) -> None:
+    """Top view of a navigation arena: obstacles (and their inflation), the planned path (``P x 2``, m) and the CoM
+    path (``T x 2``), or several (a sequence of them, e.g. one per seed, named by ``labels``), or none."""
     from matplotlib.patches import Polygon
 
     fig, ax = plt.subplots(figsize=(6, 6))
@@ -252,8 +254,14 @@ def plot_navigation(arena, planned_path: np.ndarray, com_path: np.ndarray | None
             ax.add_patch(Polygon(grown @ np.array([[c, s], [-s, c]]) + [obstacle.x, obstacle.y], fill=False,
                                  ls=":", color="#8c6d4f"))
     ax.plot(planned_path[:, 0], planned_path[:, 1], "k--", lw=1.2, label="planned path")
-    if com_path is not None:
-        ax.plot(com_path[:, 0], com_path[:, 1], color="#d62728", lw=1.5, label="CoM")
+    if com_paths is None:
+        com_paths = []
+    elif isinstance(com_paths, np.ndarray) and com_paths.ndim == 2:
+        com_paths = [com_paths]
+    colors = ["#d62728", "#1f77b4", "#2ca02c", "#9467bd", "#ff7f0e"]
+    for i, com in enumerate(com_paths):
+        ax.plot(com[:, 0], com[:, 1], color=colors[i % len(colors)], lw=1.5,
+                label=labels[i] if labels else "CoM")
     ax.scatter(*arena.start, marker="o", color="k", zorder=3, label="start")
     ax.scatter(*arena.goal, marker="*", s=160, color="#ffbf00", edgecolor="k", zorder=3, label="goal")
     xmin, xmax, ymin, ymax = arena.bounds

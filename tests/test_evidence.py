@@ -13,11 +13,12 @@ COLUMNS = "method,robot,setting,task,seed,episode,normalized_cost,success,final_
 
 
 def write_record(root, relative, *, method, robot, seed, costs, overrides=(), keys=None, factors=None, cpu="",
-                 seconds=60.0, recipe_method=None):
+                 seconds=60.0, recipe_method=None, fields=None):
     """A verified job record (``record.json``, :mod:`hierloco.pipeline.records`) under ``root/relative``: ``costs``
     maps (setting, task) to episode costs; ``keys`` maps (setting, task) to the evaluation key's hash (default: one
     per method, robot, seed, setting, task and overrides); ``factors`` the stage-key sizes (latent_dim, num_experts,
-    num_transitions, high_level_frames)."""
+    num_transitions, high_level_frames); ``fields`` maps (setting, task) to other columns' per-episode values
+    (``{"final_error": [0.03]}``)."""
     from hierloco.pipeline import records
     from hierloco.pipeline.rundir import StageSpec
 
@@ -28,7 +29,8 @@ def write_record(root, relative, *, method, robot, seed, costs, overrides=(), ke
         for e, c in enumerate(episodes):
             rows.append({"method": recipe_method or method, "robot": robot, "setting": setting, "task": task,
                          "seed": seed, "episode": e, "normalized_cost": c, "success": float("nan"),
-                         "final_error": 0.0})
+                         "final_error": 0.0,
+                         **{k: v[e] for k, v in (fields or {}).get((setting, task), {}).items()}})
         digest = (keys or {}).get((setting, task)) or hashlib.sha1(
             repr((method, robot, seed, setting, task, tuple(overrides))).encode()).hexdigest()[:12]
         specs.append(StageSpec(f"evaluation_{setting}_{task}", {}, f"evaluation/{setting}/{task}-{digest}.npz"))

@@ -1,9 +1,11 @@
 """Navigation: a cluttered arena of boxes, a collision-free path from a grid planner, and clearance checks
-(``docs/index.md``, Navigation).
+(``docs/index.md``, Navigation; the paper's Fig. 2 uses LAT with a waypoint planner this way).
 
 The path is planned with A* on an occupancy grid whose obstacles are inflated by the robot's footprint radius,
-shortened by line-of-sight shortcuts and resampled evenly; a :class:`hierloco.envs.tasks.TrajectoryTracking` over
-it makes the robot follow it with MPC.
+shortened by line-of-sight shortcuts and resampled evenly. The task :class:`Navigation` (registered as
+``navigation``) is trajectory tracking along that path in the arena: its boxes are in the robots' world during an
+evaluation (:attr:`hierloco.envs.tasks.Task.obstacles`), so a recipe evaluates it like any task
+(``+eval.tasks.navigation_arena1={task: navigation, arena_seed: 1, inflation: 0.65}``).
 
 Example:
     >>> arena = cluttered_arena(seed=0)
@@ -21,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hierloco.envs.robots import Obstacle
+from hierloco.envs.tasks import TASKS, TrajectoryTracking, _number, _points, _whole
 
 
 @dataclass(frozen=True)
@@ -173,3 +176,52 @@ def _line_free(free: np.ndarray, a: tuple[int, int], b: tuple[int, int]) -> bool
     steps = int(max(abs(b[0] - a[0]), abs(b[1] - a[1]))) * 2 + 1
     line = np.rint(np.linspace(a, b, steps)).astype(int)
     return bool(np.all(free[line[:, 0], line[:, 1]]))
+
+
+@TASKS.register("navigation")
+class Navigation(TrajectoryTracking):
+    """Follow the collision-free path through a cluttered arena to its goal (one episode per task).
+
+    The arena is :func:`cluttered_arena` of ``arena_seed``, ``num_obstacles`` and ``goal`` (m; the robot starts at
+    the origin facing +y); the path is :func:`plan_path` keeping ``inflation`` m from every box (a robot's
+    :func:`footprint_radius` plus :data:`FOOTPRINT_MARGIN`: A1 0.34 m, Daisy 0.65 m); the reference point moves
+    along it at ``speed`` m/s for the path's length plus ``extra_steps`` task steps, as in
+    :class:`~hierloco.envs.tasks.TrajectoryTracking`. ``final_error`` is the distance to the goal (success within
+    0.2 m); per episode it reports ``path_distance`` (mean CoM distance to the path, m) and ``clearance`` (the
+    closest the CoM came to a box, m). An arena with no path raises ``ValueError`` when the task is made.
+
+    Example:
+        >>> task = Navigation(arena_seed=0, num_obstacles=10, inflation=0.35)
+        >>> len(task.obstacles), task.num_episodes, bool(task.length >= 5.0)  # at least the 5 m straight line
+        (10, 1, True)
+        >>> bool(clearance(task.arena, task.path.numpy()).min() >= 0.35 - 0.05)
+        True
+    """
+
+    kind = "navigation"
+    figures = ("arena",)
+
+    def __init__(self, arena_seed: int = 0, num_obstacles: int = 10, goal: tuple[float, float] = (3.0, 4.0),
+                 inflation: float = 0.35, speed: float = 0.1, extra_steps: int = 10, name: str | None = None):
+        goal = _points("goal", [goal], "an (x, y) point in m")[0]
+        self.inflation = _number("inflation", inflation)
+        if self.inflation < 0:
+            raise ValueError(f"inflation must be >= 0 m, got {inflation!r}")
+        self.arena = cluttered_arena(seed=_whole("arena_seed", arena_seed, 0),
+                                     num_obstacles=_whole("num_obstacles", num_obstacles, 0),
+                                     goal=(float(goal[0]), float(goal[1])))
+        super().__init__(path=plan_path(self.arena, inflation=self.inflation), speed=speed,
+                         extra_steps=extra_steps, name=name)
+        self.obstacles = self.arena.obstacles
+
+    def extra_metrics(self, com_paths, episodes=None) -> dict[str, np.ndarray]:
+        """``path_distance`` (m, mean over the CoM path) and ``clearance`` (m, the CoM's closest approach to a box;
+        negative inside one), per episode of ``E x S x >=2`` CoM paths."""
+        positions = np.asarray(com_paths)[..., :2]
+        return {**super().extra_metrics(com_paths, episodes), "clearance": clearance(self.arena, positions).min(1)}
+
+    def training_split(self) -> TrajectoryTracking:
+        """The first half of the path, in the same arena."""
+        split = super().training_split()
+        split.obstacles = self.obstacles
+        return split

@@ -46,7 +46,7 @@ from hierloco.registry import Registry
 
 # The task types by name (a task's ``task:`` field in a recipe's ``eval`` section): a new type is a :class:`Task`
 # subclass decorated with ``@TASKS.register("name")``; its options are its constructor's keyword arguments.
-TASKS = Registry("task", context=("name",))
+TASKS = Registry("task", context=("name",), modules=("hierloco.envs.navigation",))
 
 W_POSITION, W_YAW = 2.0, 1.0  # [w1, w2]
 SUCCESS_RADIUS = 0.2  # m
@@ -108,6 +108,8 @@ class Task:
         name: this task's name (constructor keyword ``name``, default ``kind``), used in results and metric names.
         num_episodes: target sets. num_steps: task steps per episode. step_duration: seconds per task step.
         cost_term_names: the names of the cost terms, in order (``cost`` is their sum).
+        obstacles: static boxes that are part of the task's world (a navigation arena,
+            :class:`hierloco.envs.navigation.Navigation`); an evaluation builds them into its robots' world.
     """
 
     kind: str = "task"
@@ -117,7 +119,9 @@ class Task:
     step_duration: float = STEP_DURATION
     start_yaw: float = START_YAW
     has_success: bool = True  # whether ``final_error <= 0.2`` means success
-    figures: tuple[str, ...] = ("paths",)  # what a run draws of it: "paths", "velocity" (plot), "gait" (diagram)
+    figures: tuple[str, ...] = ("paths",)  # what a run draws of it: "paths", "velocity" (plot), "gait" (diagram),
+    #                                        "arena" (a navigation task's top view)
+    obstacles: tuple = ()  # static boxes (hierloco.envs.robots.Obstacle) in the robots' world while it is evaluated
     cost_term_names: tuple[str, ...] = ("tracking", "yaw")
 
     def __init__(self, name: str | None = None):

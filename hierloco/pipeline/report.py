@@ -50,7 +50,7 @@ def task_figures(evaluation: TaskEvaluation, task, robot, figures: Path, *, meth
                  steps_per_action: int) -> list[Path]:
     """The figures a task declares (:attr:`hierloco.envs.tasks.Task.figures`: ``paths``, ``velocity``, ``gait``)
     drawn from an evaluation's recording; returns the files written (none without a recording)."""
-    from hierloco.plots import plot_gait_diagram, plot_task_paths, plot_velocity_tracking
+    from hierloco.plots import plot_gait_diagram, plot_navigation, plot_task_paths, plot_velocity_tracking
 
     recording = evaluation.recording
     if "com_paths" not in recording:
@@ -65,6 +65,10 @@ def task_figures(evaluation: TaskEvaluation, task, robot, figures: Path, *, meth
         elif figure == "velocity":
             paths.append(figures / f"{setting}_{name}_velocity.png")
             plot_velocity_tracking(task, recording["com_paths"][0], paths[-1], title=title)
+        elif figure == "arena":  # a navigation task: the boxes, their inflation, the planned and the CoM paths
+            paths.append(figures / f"{setting}_{name}_arena.png")
+            plot_navigation(task.arena, task.path.numpy(), recording["com_paths"][0, :, :2], paths[-1],
+                            inflation=task.inflation, title=title)
         elif figure == "gait" and "foot_contacts" in recording:
             paths.append(figures / f"{setting}_gait_during_{name}.png")
             plot_gait_diagram(recording["foot_contacts"][0, : GAIT_DIAGRAM_ACTIONS * steps_per_action],
@@ -75,8 +79,8 @@ def task_figures(evaluation: TaskEvaluation, task, robot, figures: Path, *, meth
 
 
 def task_video(evaluation: TaskEvaluation, task, robot, path: Path, *, disabled_legs=()) -> np.ndarray | None:
-    """Renders the first episode of a task (MuJoCo offscreen, 20 fps) with its goals or path drawn on the floor;
-    returns the frames (``T x H x W x 3``), or ``None`` when the evaluation kept no joint positions."""
+    """Renders the first episode of a task (MuJoCo offscreen, 20 fps) with its goals or path drawn on the floor and
+    its obstacles in place; returns the frames (``T x H x W x 3``), or ``None`` when the evaluation kept no joint positions."""
     from hierloco.render import render_frames, save_video
 
     qpos = evaluation.recording.get("qpos")
@@ -85,7 +89,8 @@ def task_video(evaluation: TaskEvaluation, task, robot, path: Path, *, disabled_
     stride = int(round(1.0 / (VIDEO_FPS * CONTROL_TIMESTEP)))
     markers = task.markers(episode=0)
     markers = markers[:: max(1, len(markers) // 40)]
-    frames = render_frames(robot, qpos[0, ::stride], disabled_legs=disabled_legs, markers=markers)
+    frames = render_frames(robot, qpos[0, ::stride], disabled_legs=disabled_legs, markers=markers,
+                           obstacles=task.obstacles)
     save_video(frames, path, fps=VIDEO_FPS)
     return frames
 

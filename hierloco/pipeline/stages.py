@@ -297,7 +297,7 @@ def evaluation_rollout(robot, params: dict, task, low_level, model: TrainedCoMMo
     planner = make_planner(world_model, seed=params["seed"], **params["planner"])
     locked, limp = fault_legs(robot, params["setting"])
     env = LatentActionEnv(low_level, num_robots=task.num_episodes, disabled_legs=locked, limp_legs=limp,
-                          record=True, seed=params["seed"], nthread=nthread,
+                          record=True, seed=params["seed"], nthread=nthread, obstacles=task.obstacles,
                           robot=setting_robot(robot, params["setting"], params.get("hardware")))
     try:
         return run_task(env, planner, task, progress=progress)

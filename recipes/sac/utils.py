@@ -157,7 +157,7 @@ def build_evaluation(run, params, agent: SACAgent, make_low_level) -> TaskEvalua
 
     task = make_task_from_spec(params["task_name"], params["task"])
     env = LatentActionEnv(make_low_level(task.num_episodes), num_robots=task.num_episodes, record=True,
-                          seed=params["seed"], nthread=run.nthread)
+                          seed=params["seed"], nthread=run.nthread, obstacles=task.obstacles)
     try:
         rollout = run_task(env, ActorPolicy(agent.actor_on("cpu")), task, transforms=[GoalObservation(task)],
                            progress=run.progress)

@@ -6,8 +6,8 @@
 Reads every study's job records (``hierloco.evidence``: per-episode rows, stage keys, build times) and decides each
 claim with the tests of :mod:`hierloco.stats` (``docs/statistics.md``), then writes:
 
-- ``<study>/verdicts.md`` for the comparison, the damage study, the two hardware studies and the ablations: that
-  study's own runs only;
+- ``<study>/verdicts.md`` for the comparison, the damage study, the two hardware studies, the ablations and
+  navigation: that study's own runs only;
 - ``paper_check.md``: every claim of the paper (Li et al., RA-L 2021), where the paper makes it, the numbers it
   states (with robot and figure), ours (one number per configuration, with the folders its runs come from), the
   test and the verdict; the runs of one configuration found in several studies (the same stage keys) are pooled,
@@ -81,6 +81,8 @@ STUDIES = (
     Study("sample_efficiency", ("sample_efficiency/records",),
           command="python recipes/sample_efficiency/run.py records=results/sample_efficiency/records "
                   "out_dir=results/sample_efficiency"),
+    Study("navigation", ("navigation/records",),
+          command="python recipes/navigation/run.py records=results/navigation/records out_dir=results/navigation"),
 )
 # comparison tables of earlier runs of compare_full's study, kept without records (per-episode rows only): declared
 # the same configurations as compare_full's records with the same labels (hierloco.evidence.adopt_configs)
@@ -328,6 +330,39 @@ def hardware_checks(runs: list[Run]) -> list[Check]:
     return checks
 
 
+NAVIGATION_PREFIX = "navigation_arena"  # the navigation study's tasks (recipes/navigation/run.py)
+
+
+def navigation_checks(runs: list[Run]) -> list[Check]:
+    """The navigation claim per robot, over seeds (each seed's value: its mean over the arenas): LAT follows the
+    planned path (normalised cost better than standing still) and reaches the goal (the CoM's distance to it at the
+    end significantly below the 0.2 m success radius); both parts must hold."""
+    from hierloco.envs.tasks import SUCCESS_RADIUS
+
+    checks = []
+    for robot in sorted({r.robot for r in runs}):
+        mine = select(runs, method="lat", robot=robot, setting="normal",
+                      task=lambda t: t.startswith(NAVIGATION_PREFIX))
+        if not mine:
+            continue
+        _, costs, _ = seed_values(mine)
+        _, errors, _ = seed_values(mine, value=lambda r: float(np.nanmean(r.final_error)))
+        success = [s for r in distinct(mine) for s in r.success if not math.isnan(s)]
+        closest = [c for r in distinct(mine) for c in r.clearance if not math.isnan(c)]
+        arenas = sorted({int(r.task.removeprefix(NAVIGATION_PREFIX)) for r in mine})
+        ours = (f"{_text('lat', costs)}; goals reached {int(sum(success))}/{len(success)} (arenas "
+                f"{', '.join(map(str, arenas))}); goal error {errors.mean():.2f} +- {errors.std():.2f} m"
+                + (f"; closest CoM to a box {min(closest):.2f} m" if closest else ""))
+        checks.append(compare_check.decided(
+            "navigation", "LAT follows a planned path through clutter to the goal (cost better than standing "
+            "still, and the goal error below the 0.2 m success radius)", robot, "normal", "navigation", ours, "-",
+            [compare_check.part("lat vs standing still", costs, 1.0, "better",
+                                names=("lat:navigation", "standing still")),
+             compare_check.part(f"goal error vs {SUCCESS_RADIUS} m", errors, SUCCESS_RADIUS, "better",
+                                names=("goal error (m)", f"{SUCCESS_RADIUS} m"))], "Sec. I, Fig. 2"))
+    return checks
+
+
 def _goals(runs, method, setting) -> str:
     """How many goals the runs reached, and in how many steps."""
     chosen = distinct(select(runs, method=method, setting=setting, task="goal_reaching"))
@@ -354,6 +389,8 @@ def study_checks(evidence: Evidence) -> dict[str, list[Check]]:
         if name in runs:
             out[name] = [c for c in ablation_checks(runs[name])
                          if name == "ablations" or c.verdict != NOT_MEASURED]  # no_turn varies the latent only
+    if "navigation" in runs:
+        out["navigation"] = navigation_checks(runs["navigation"])
     return out
 
 
@@ -457,6 +494,9 @@ def _figure_claims():
          "\"re-trained for new tasks, hence using 3 times as much data\" (ours: LAT with N CoM transitions in all "
          "against SAC with N high-level steps per task, at N = 2000, 5000 and the comparison's 10,000)",
          "Sec. I; Sec. III-C; Sec. IV-B", "-", ("sample_efficiency", "sample_efficient")),
+        ("\"Our method can directly be used with waypoint navigation methods to reach a desired goal\" (ours: "
+         "cluttered arenas, an A* path inflated by the robot's footprint, LAT's trajectory tracking along it)",
+         "Sec. I; Fig. 2 (Daisy in iGibson)", "-", ("navigation", "navigation")),
     ]
 
 
@@ -473,9 +513,6 @@ NOT_MEASURED_YET = [
      "0.30 m/s and back, it does not pick gaits by speed on either robot (`gaits/profile.md`): the gaits' experts "
      "cover about the same command box, so no task within it needs a change of gait, and \"if needed by the task\" "
      "has no task to be tested on here)"),
-    ("\"Our method can directly be used with waypoint navigation methods to reach a desired goal\"",
-     "Sec. I; Fig. 2", "a navigation study with records over several arenas and seeds (`navigation/`: one arena, "
-     "seed 0, A1 and Daisy reach the goal within 0.03 m; no test over arenas and seeds yet)"),
     ("the same results on the real Daisy (Fig. 8, 10a)", "Sec. IV-D",
      "a real robot: the hardware studies here perturb a simulated copy (mass, motors, friction, latency, CoM "
      "noise), which is what they measure"),
@@ -571,6 +608,7 @@ def paper_checks(evidence: Evidence) -> dict[str, list[Check]]:
     if "adverse" in evidence.runs:
         out["adverse"] = adverse_checks(evidence.runs["adverse"], evidence.findings.get("adverse", []))
     out["sample_efficiency"] = sample_efficiency_checks(evidence)
+    out["navigation"] = navigation_checks(evidence.runs.get("navigation", []))
     return out
 
 
@@ -592,7 +630,7 @@ def _folder_of(source: str, check: Check) -> str:
                                              for part in check.parts for name in part.names):
         return "compare_full"   # the full budgets are the comparison's runs (sample_efficiency_checks)
     return {"pooled": "pooled", "ablations": "ablations", "adverse": "adverse",
-            "sample_efficiency": "sample_efficiency"}[source]
+            "sample_efficiency": "sample_efficiency", "navigation": "navigation"}[source]
 
 
 def paper_page(evidence: Evidence, checks: dict[str, list[Check]]) -> str:
@@ -623,7 +661,7 @@ def paper_page(evidence: Evidence, checks: dict[str, list[Check]]) -> str:
         for check in chosen:
             folder = _folder_of(source, check)
             ours = ours_text(check, folders) if source == "pooled" else ours_text(check, folder=folder)
-            if check.task == "goal_reaching" and "goals reached" in check.ours:
+            if check.task in ("goal_reaching", "navigation") and "goals reached" in check.ours:
                 ours += check.ours[check.ours.index(";"):]
             lines.append(f"| {check.robot} | {check.setting} | {check.task} | {check.claim} | {ours} | "
                          f"{check.detail or '-'} | **{check.verdict}** | {folder} |")
@@ -646,8 +684,8 @@ def paper_page(evidence: Evidence, checks: dict[str, list[Check]]) -> str:
         lines.append("\n## Statements about the design, counted rather than tested\n")
         lines.append("\"SAC and SAC-SAC are re-trained for new tasks, hence using 3 times as much data as our "
                      "approach\" (Sec. IV-B), counted from the comparison's records: " + "; ".join(counted) + ".")
-    lines.insert(4, f"**All claims tested: {counts_line(everything)}** (plus {len(NOT_MEASURED_YET)} not measured "
-                    "yet).\n")
+    unmeasured = len(NOT_MEASURED_YET) + sum(not chosen for *_, chosen in paper_claims(checks))
+    lines.insert(4, f"**All claims tested: {counts_line(everything)}** (plus {unmeasured} not measured yet).\n")
     return "\n".join(lines) + "\n"
 
 
@@ -741,6 +779,9 @@ def job_of(evidence: Evidence, study: str, robot: str, name: str) -> tuple[tuple
         if not minutes and (method, robot) in evidence.compute_tables.get(study, {}):
             minutes = [evidence.compute_tables[study][(method, robot)]]
         return ("hardware", study, method), f"{method} hardware job", minutes
+    if study == "navigation":  # one LAT job per robot and seed evaluates every arena
+        runs = [r for r in evidence.runs.get(study, []) if r.robot == robot]
+        return (study, "lat"), "LAT navigation job (every arena)", _minutes(runs)
     if study == "sample_efficiency":
         from recipes.sample_efficiency.run import BUDGET
 

@@ -59,3 +59,37 @@ def test_obstacles_are_solid_in_the_simulation():
     y_walled = walled.run(pattern).com_state[0, :, 1].max()
     assert y_open > 1.2
     assert y_walled < 0.8 - 0.1, "the trunk (0.125 m half-length) and feet stop at the wall"
+
+
+def test_the_navigation_task_is_a_registered_task_with_its_arena():
+    from hierloco.envs.navigation import Navigation
+    from hierloco.envs.tasks import TASKS, make_task
+
+    assert "navigation" in TASKS.names()
+    task = make_task("navigation", arena_seed=3, num_obstacles=6, goal=[2.0, 3.0], inflation=0.3, name="arena3")
+    assert isinstance(task, Navigation) and task.name == "arena3" and len(task.obstacles) == 6
+    np.testing.assert_allclose(task.path[-1].numpy(), [2.0, 3.0], atol=1e-6)  # the path ends at the goal
+    assert clearance(task.arena, task.path.numpy()).min() >= 0.3 - 0.05
+    # a CoM path that stops 0.5 m short of the goal: its final error, its distance to the path, its clearance
+    path = task.path.numpy()
+    stop = int(np.argmin(np.abs(np.linalg.norm(path - path[-1], axis=1) - 0.5)))
+    com = np.concatenate([path[: stop + 1], np.zeros((len(path[: stop + 1]), 3))], axis=1)[None]
+    import torch
+
+    assert abs(float(task.final_error(torch.as_tensor(com, dtype=torch.float32), torch.tensor([0]))[0]) - 0.5) < 0.03
+    metrics = task.extra_metrics(com)
+    assert metrics["path_distance"][0] < 1e-3
+    np.testing.assert_allclose(metrics["clearance"], [clearance(task.arena, path[: stop + 1]).min()])
+    assert task.training_split().obstacles == task.obstacles  # the split keeps the arena
+    assert make_task("trajectory_tracking").obstacles == ()  # the other tasks are in the open
+
+
+def test_a_navigation_task_without_a_path_or_with_bad_options_is_refused():
+    from hierloco.envs.tasks import make_task
+
+    with pytest.raises(ValueError, match="inside an \\(inflated\\) obstacle|no collision-free path"):
+        make_task("navigation", inflation=3.0)
+    with pytest.raises(ValueError, match="inflation must be >= 0"):
+        make_task("navigation", inflation=-0.1)
+    with pytest.raises(ValueError, match="unknown option 'arena'"):
+        make_task("navigation", arena=1)

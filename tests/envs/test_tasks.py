@@ -369,7 +369,7 @@ def test_bad_constructor_arguments(make):
 
 
 def test_make_task():
-    assert set(TASKS) == {"velocity_tracking", "goal_reaching", "trajectory_tracking"}
+    assert set(TASKS) == {"velocity_tracking", "goal_reaching", "trajectory_tracking", "navigation"}
     task = make_task("goal_reaching", num_steps=5, radius=1.0)
     assert isinstance(task, GoalReaching) and task.num_steps == 5
     assert np.allclose(task.goals.norm(dim=-1).numpy(), 1.0)

@@ -114,3 +114,27 @@ def test_names_make_the_2x512_sac_sac_the_one_the_claims_are_about(tmp_path):
     assert "sac_sac:normal 0.910 (n=3" in learned_best({})  # the 2 x 256 runs
     swapped = learned_best({"sac_sac_2x512": "sac_sac", "sac_sac": "sac_sac_2x256"})
     assert "sac_sac:normal 0.310 (n=3" in swapped and "sac_sac_2x256" not in swapped
+
+
+def test_navigation_is_decided_over_seeds_on_cost_and_goal_error(tmp_path):
+    """A1 follows the paths and ends within 0.05 m of the goals: holds; Daisy ends 1.5 m short: does not hold, though
+    its cost is well below standing still's. The claim leaves the paper's "not measured yet" list once it has runs."""
+    results = results_tree(tmp_path / "results")
+    before = pages(load(results))["paper_check.md"]
+    assert "**not measured yet** (no runs of the study it needs: `navigation`)" in before
+    jobs = results / "navigation" / "records"
+    for robot, cost, error in (("a1", 0.01, 0.03), ("daisy", 0.20, 1.5)):
+        for seed in range(3):
+            tasks = [("normal", f"navigation_arena{a}") for a in range(2)]
+            write_record(jobs, f"runs/{robot}_seed{seed}", method="lat", robot=robot, seed=seed,
+                         costs={t: [cost + 0.002 * (seed + a)] for a, t in enumerate(tasks)},
+                         fields={t: {"final_error": [error + 0.01 * (seed - a)], "success": [float(error <= 0.2)],
+                                     "clearance": [0.3 + 0.01 * a]} for a, t in enumerate(tasks)})
+    written = pages(load(results))
+    assert "navigation/verdicts.md" in written
+    paper = written["paper_check.md"]
+    rows = {line.split(" | ")[0][2:]: line for line in paper.splitlines() if "| normal | navigation |" in line}
+    assert "**holds**" in rows["a1"] and "goals reached 6/6 (arenas 0, 1)" in rows["a1"]
+    assert "**does not hold**" in rows["daisy"] and "goals reached 0/6" in rows["daisy"]
+    assert "closest CoM to a box 0.30 m" in rows["a1"]
+    assert "(no runs of the study it needs: `navigation`)" not in paper
