@@ -219,11 +219,11 @@ def test_names_show_a_variant_under_the_methods_name_and_refuse_two_under_one():
     from hierloco.pipeline.config import ConfigError
     from recipes.compare import run
 
-    swap = "+names={sac_sac_2x512: sac_sac, sac_sac: sac_sac_2x256}"
-    cfg = compare_config("methods=[sac_sac,sac_sac_2x512]", "robots=[a1]", swap)
+    cfg = compare_config("methods=[sac_sac,sac_sac_2x512]", "robots=[a1]")  # the recipe's own names
+    assert dict(cfg.names) == {"sac_sac_2x512": "sac_sac", "sac_sac": "sac_sac_2x256"}
     run.check(cfg)
     rows = [{"method": m, "normalized_cost": c} for m, c in (("sac_sac", 0.9), ("sac_sac_2x512", 0.5), ("lat", 0.1))]
     assert [(r["method"], r["normalized_cost"]) for r in run.renamed(rows, dict(cfg.names))] == [
         ("sac_sac_2x256", 0.9), ("sac_sac", 0.5), ("lat", 0.1)]
     with pytest.raises(ConfigError, match="two methods would be shown as 'sac_sac'"):
-        run.check(compare_config("methods=[sac_sac,sac_sac_2x512]", "robots=[a1]", "+names={sac_sac_2x512: sac_sac}"))
+        run.check(compare_config("methods=[sac_sac,sac_sac_2x512]", "robots=[a1]", "names.sac_sac=sac_sac"))
