@@ -235,6 +235,21 @@ def plot_samples(rows: Sequence[dict], path: str | os.PathLike, *, tasks: Sequen
     save_figure(fig, path)
 
 
+def _rounded_box(half_x: float, half_y: float, radius: float, points_per_corner: int = 9) -> np.ndarray:
+    """The outline (``P x 2``, m, box frame) of the points within ``radius`` of a ``2 half_x x 2 half_y`` box: its
+    sides moved out by ``radius``, joined by quarter circles about its corners.
+
+        >>> outline = _rounded_box(0.5, 0.2, 0.1)
+        >>> bool(np.allclose(outline.max(0), [0.6, 0.3]))
+        True
+    """
+    outline = []
+    for k, (cx, cy) in enumerate([(half_x, half_y), (-half_x, half_y), (-half_x, -half_y), (half_x, -half_y)]):
+        angles = np.linspace(k * np.pi / 2, (k + 1) * np.pi / 2, points_per_corner)
+        outline.append(np.stack([cx + radius * np.cos(angles), cy + radius * np.sin(angles)], -1))
+    return np.concatenate(outline)
+
+
 def plot_navigation(arena, planned_path: np.ndarray, com_paths, path: str | os.PathLike, *,
                     inflation: float | None = None, title: str | None = None,
                     labels: Sequence[str] | None = None) -> None:
@@ -248,9 +263,8 @@ def plot_navigation(arena, planned_path: np.ndarray, com_paths, path: str | os.P
         hx, hy = obstacle.half_size[:2]
         corners = np.array([[hx, hy], [-hx, hy], [-hx, -hy], [hx, -hy]]) @ np.array([[c, s], [-s, c]])
         ax.add_patch(Polygon(corners + [obstacle.x, obstacle.y], color="#8c6d4f"))
-        if inflation:
-            grown = np.array([[hx + inflation, hy + inflation], [-hx - inflation, hy + inflation],
-                              [-hx - inflation, -hy - inflation], [hx + inflation, -hy - inflation]])
+        if inflation:  # the points within `inflation` of the box: the box grown by a disc (rounded corners)
+            grown = _rounded_box(hx, hy, inflation)
             ax.add_patch(Polygon(grown @ np.array([[c, s], [-s, c]]) + [obstacle.x, obstacle.y], fill=False,
                                  ls=":", color="#8c6d4f"))
     ax.plot(planned_path[:, 0], planned_path[:, 1], "k--", lw=1.2, label="planned path")
