@@ -263,6 +263,26 @@ def read_findings(root: str | os.PathLike, *, variants: Mapping = VARIANTS) -> l
     return found
 
 
+def read_stage_reports(root: str | os.PathLike, stage: str, *, variants: Mapping = VARIANTS) -> list[dict]:
+    """What stage ``stage`` reported in every finished job under ``root`` whose plan has it (a verified record
+    holding that stage's key and its report, e.g. ``latent_continuity``): per job its ``method``, ``robot``,
+    ``seed`` and ``record``, with the report's fields. An edited record raises."""
+    from hierloco.pipeline.records import RECORD
+
+    found = []
+    for path in sorted(Path(root).rglob(RECORD)):
+        record = _record(path.parent)
+        report = (record["report"] or {}).get(stage)
+        planned = any(Path(filename).stem == stage for filename in record["stages"])
+        if record["rows"] is None or not planned or not isinstance(report, dict):
+            continue
+        overrides = record["signature"].get("overrides", [])
+        found.append({**report, "method": method_of(record["signature"], variants),
+                      "robot": _override(overrides, "robot", ""), "seed": int(_override(overrides, "seed", -1)),
+                      "record": path.parent.as_posix()})
+    return found
+
+
 def read_table(path: str | os.PathLike, *, folder: str = "", profile: str | None = None) -> list[Run]:
     """The runs of a per-episode table (``comparison.csv``, ``hardware.csv``; columns as ``episodes.csv``) that has
     no records: no stage keys (``config`` is empty), no CPU, no compute. ``profile`` overrides the table's

@@ -13,12 +13,12 @@ COLUMNS = "method,robot,setting,task,seed,episode,normalized_cost,success,final_
 
 
 def write_record(root, relative, *, method, robot, seed, costs, overrides=(), keys=None, factors=None, cpu="",
-                 seconds=60.0, recipe_method=None, fields=None):
+                 seconds=60.0, recipe_method=None, fields=None, report=None):
     """A verified job record (``record.json``, :mod:`hierloco.pipeline.records`) under ``root/relative``: ``costs``
     maps (setting, task) to episode costs; ``keys`` maps (setting, task) to the evaluation key's hash (default: one
     per method, robot, seed, setting, task and overrides); ``factors`` the stage-key sizes (latent_dim, num_experts,
     num_transitions, high_level_frames); ``fields`` maps (setting, task) to other columns' per-episode values
-    (``{"final_error": [0.03]}``)."""
+    (``{"final_error": [0.03]}``); ``report`` maps a stage of its own (``latent_continuity``) to what it reported."""
     from hierloco.pipeline import records
     from hierloco.pipeline.rundir import StageSpec
 
@@ -48,7 +48,9 @@ def write_record(root, relative, *, method, robot, seed, costs, overrides=(), ke
         if "num_transitions" in factors:
             specs.append(StageSpec(f"dynamics_data_{setting}", {"params": {"num_transitions": factors["num_transitions"]}},
                                    f"dynamics_data_{setting}.npz"))
-    records.save(records.make_record(signature, specs, rows=rows, builds=builds, seconds=seconds), record)
+    specs += [StageSpec(name, {"params": {"seed": seed}}, f"{name}.json") for name in (report or {})]
+    records.save(records.make_record(signature, specs, rows=rows, builds=builds, seconds=seconds, report=report),
+                 record)
     return record
 
 

@@ -127,19 +127,77 @@ def run_task(env: LatentActionEnv, policy, task: Task, *, episodes=None, transfo
     return TaskRollout(result, actions, paths, contacts, qpos, fell, timed.seconds / task.num_steps, metrics)
 
 
+def latent_grid(action_low, action_high, grid: int) -> tuple[np.ndarray, np.ndarray]:
+    """A lattice of ``grid`` points per axis over the box ``[action_low, action_high]`` (``Z`` each): the integer
+    lattice index ``G x Z`` and the latents ``G x Z``, ``G = grid ** Z``, the last axis varying fastest.
+
+        >>> index, latents = latent_grid([-1.0, 0.0], [1.0, 2.0], 3)
+        >>> index.shape, latents[:4].tolist()
+        ((9, 2), [[-1.0, 0.0], [-1.0, 1.0], [-1.0, 2.0], [0.0, 0.0]])
+    """
+    low, high = np.asarray(action_low, dtype=np.float64), np.asarray(action_high, dtype=np.float64)
+    index = np.stack(np.meshgrid(*[np.arange(grid)] * len(low), indexing="ij"), -1).reshape(-1, len(low))
+    return index, low + (high - low) * index / (grid - 1)
+
+
 def latent_grid_paths(low_level, *, grid: int = 7, num_actions: int = 3, seed: int = 0):
     """Walks a ``grid x grid`` lattice of 2-D actions over the low level's box from standing, each held for
     ``num_actions`` actions. Returns the latents ``G x 2`` and the CoM paths ``G x (num_actions * N) x 5``."""
     if low_level.action_dim != 2:
         raise ValueError(f"the latent map needs a 2-D action space, this one has {low_level.action_dim} dimensions")
-    axes = [np.linspace(lo, hi, grid) for lo, hi in zip(low_level.action_low, low_level.action_high)]
-    latents = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 2)
+    _, latents = latent_grid(low_level.action_low, low_level.action_high, grid)
     from hierloco.envs.batched_sim import BatchedSimulator
 
     sim = BatchedSimulator(low_level.robot, len(latents), seed=seed)
     paths = [low_level.run(sim, latents).com_state for _ in range(num_actions)]
     sim.close()
     return latents, np.concatenate(paths, 1)
+
+
+def continuity_statistics(index: np.ndarray, velocity: np.ndarray, fell: np.ndarray) -> dict:
+    """How continuously a lattice of latents maps to CoM motion: the mean distance between the CoM velocities
+    (``G x 2``, m/s) of lattice neighbours (``index`` ``G x Z`` one step apart along one axis) and of all pairs of
+    lattice points, over the pairs where neither robot fell (``fell``: ``G`` bool). A continuous map gives
+    neighbours much closer than the average pair (their ratio well below 1); a map that jumps between neighbours
+    does not.
+
+        >>> index = np.arange(5)[:, None]
+        >>> smooth = np.stack([np.linspace(0, 0.4, 5), np.zeros(5)], -1)
+        >>> round(continuity_statistics(index, smooth, np.zeros(5, bool))["ratio"], 3)
+        0.5
+    """
+    index, velocity, fell = np.asarray(index), np.asarray(velocity, dtype=np.float64), np.asarray(fell, dtype=bool)
+    i, j = np.triu_indices(len(index), 1)
+    walking = ~fell[i] & ~fell[j]
+    distance = np.linalg.norm(velocity[i] - velocity[j], axis=-1)
+    neighbours = walking & (np.abs(index[i] - index[j]).sum(-1) == 1)
+    near = float(distance[neighbours].mean()) if neighbours.any() else float("nan")
+    pair = float(distance[walking].mean()) if walking.any() else float("nan")
+    return {"neighbour_difference": near, "pair_difference": pair, "ratio": near / pair if pair > 0 else float("nan"),
+            "neighbour_pairs": int(neighbours.sum()), "pairs": int(walking.sum()), "fell_fraction": float(fell.mean())}
+
+
+def latent_continuity(low_level, *, grid: int = 7, num_actions: int = 3, seed: int = 0) -> dict:
+    """Li et al., RA-L 2021, Sec. III-B, Fig. 4: "close-by samples in the latent space lead to continuously varying
+    CoM motion". Holds every latent of a ``grid``-point lattice over the low level's box (``grid ** Z`` robots in one
+    batched simulation) for ``num_actions`` actions from standing and measures each one's mean CoM velocity over the
+    actions after the first (``G x 2``, m/s, in each action's start frame); returns the lattice, the velocities,
+    which robots fell and :func:`continuity_statistics` (``docs/statistics.md`` for the test over seeds)."""
+    from hierloco.envs.batched_sim import BatchedSimulator
+
+    if low_level.num_choices is not None:
+        raise ValueError("latent continuity needs a continuous action space, this low level has discrete choices")
+    index, latents = latent_grid(low_level.action_low, low_level.action_high, grid)
+    sim = BatchedSimulator(low_level.robot, len(latents), seed=seed)
+    try:
+        results = [low_level.run(sim, latents) for _ in range(num_actions)]
+    finally:
+        sim.close()
+    velocities, fell = action_velocities(results, low_level.steps_per_action)
+    velocity = np.mean(velocities, 0)
+    return {"grid": int(grid), "latent_dim": int(latents.shape[1]), "num_actions": int(num_actions),
+            "latents": latents.tolist(), "velocity": velocity.tolist(), "fell": fell.tolist(),
+            **continuity_statistics(index, velocity, fell)}
 
 
 def action_velocities(results, steps_per_action: int) -> tuple[list[np.ndarray], np.ndarray]:

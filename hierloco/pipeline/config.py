@@ -318,6 +318,15 @@ def check_eval(c: Checker) -> dict:
     for name in get(c.cfg, "eval.videos") or []:
         if name not in specs:
             c.fail(f"eval.videos names {name!r}, which is not an evaluated task ({', '.join(specs)})")
+    continuity = get(c.cfg, "eval.latent_continuity")
+    if continuity is not None:
+        if not hasattr(continuity, "keys") or set(continuity) - {"grid", "num_actions"}:
+            c.fail(f"eval.latent_continuity must be null or a mapping of grid and num_actions, got {continuity!r}")
+        else:
+            for name, least in (("grid", 2), ("num_actions", 2)):
+                value = continuity.get(name, least)
+                if not (isinstance(value, int) and not isinstance(value, bool) and value >= least):
+                    c.fail(f"eval.latent_continuity.{name} must be an integer >= {least}, got {value!r}")
     if not isinstance(get(c.cfg, "eval.figures"), bool):
         c.fail(f"eval.figures must be true or false, got {get(c.cfg, 'eval.figures')!r}")
     return tasks

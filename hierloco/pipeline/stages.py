@@ -46,6 +46,15 @@ class GaitPolicyCheck(JsonReport):
               "interpolation_between": float}
 
 
+class LatentContinuity(JsonReport):
+    """CoM velocities over a lattice of latents and how continuously they vary
+    (:func:`hierloco.components.evaluation.latent_continuity`)."""
+
+    SCHEMA = {"grid": int, "latent_dim": int, "num_actions": int, "latents": list, "velocity": list, "fell": list,
+              "neighbour_difference": float, "pair_difference": float, "ratio": float, "neighbour_pairs": int,
+              "pairs": int, "fell_fraction": float}
+
+
 class GaitPolicyQualityError(Finding, ValueError):
     """The latent gait policy does not reproduce enough of its experts in simulation."""
 
@@ -163,6 +172,24 @@ def check_gait_policy_reproduction(run, check: GaitPolicyCheck) -> None:
             f"{np.max(errors):.2f} m/s, {int(np.isinf(errors).sum())} fell): train it longer (policy.epochs) or "
             "wider (policy.hidden), or let the experts settle longer (experts.settle_time); "
             "checks.min_reproduced_fraction sets the bar")
+
+
+def latent_continuity_stage(cfg, policy: Stage) -> Stage | None:
+    """The optional measurement of how continuously the latent space maps to CoM motion (Sec. III-B, Fig. 4),
+    planned only when ``eval.latent_continuity`` is set (``{grid: 7, num_actions: 3}``), so runs without it keep
+    their plans and keys."""
+    options = cfg.eval.get("latent_continuity")
+    if not options:
+        return None
+    params = {"seed": cfg.seed, "grid": int(options.get("grid", 7)), "num_actions": int(options.get("num_actions", 3))}
+    return Stage("latent_continuity", params, {"gait_policy": policy.digest}, "latent_continuity.json",
+                 LatentContinuity, build_latent_continuity)
+
+
+def build_latent_continuity(run, params, low_level) -> LatentContinuity:
+    from hierloco.components.evaluation import latent_continuity
+
+    return LatentContinuity(latent_continuity(low_level, **params))
 
 
 def latent_low_level(policy: Stage) -> dict:

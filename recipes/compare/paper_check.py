@@ -73,6 +73,7 @@ class Part:
     paired: bool
     decision: stats.Decision
     names: tuple[str, str] = ("", "")   # what a and b are: (method, setting) labels for readers of the check
+    options: tuple = ()                 # the test's own options (e.g. (("min_effect_rel", 0.5),)), where not the defaults
 
 
 @dataclass(frozen=True)
@@ -114,9 +115,11 @@ def _text(method: str, means: np.ndarray) -> str:
     return f"{method} {means.mean():.2f} +- {means.std():.2f}"
 
 
-def part(label: str, a, b, kind: str, *, paired: bool = False, parts: int = 1, names=("", "")) -> Part:
+def part(label: str, a, b, kind: str, *, paired: bool = False, parts: int = 1, names=("", ""),
+         options: dict | None = None) -> Part:
     """One comparison tested: per-seed costs ``a`` (``S_a``) against ``b`` (``S_b``, or a constant), ``kind``
-    ``"better"`` or ``"close"``, refuted at ``alpha / parts`` when it is one of ``parts`` comparisons of a claim.
+    ``"better"`` or ``"close"``, refuted at ``alpha / parts`` when it is one of ``parts`` comparisons of a claim;
+    ``options``: the test's own minimum effect or margin (``min_effect_rel=0.5``), where not the defaults.
 
         >>> part("lat vs lib", [0.12, 0.11, 0.13], [0.45, 0.49, 0.44], "better").decision.verdict
         'holds'
@@ -124,8 +127,9 @@ def part(label: str, a, b, kind: str, *, paired: bool = False, parts: int = 1, n
     decide = stats.decide_better if kind == "better" else stats.decide_close
     a = tuple(float(x) for x in a)
     b = float(b) if np.ndim(b) == 0 else tuple(float(x) for x in b)
-    return Part(label, a, b, kind, paired, decide(a, b, paired=paired, refute_alpha=stats.ALPHA / parts),
-                tuple(names))
+    options = dict(options or {})
+    return Part(label, a, b, kind, paired, decide(a, b, paired=paired, refute_alpha=stats.ALPHA / parts, **options),
+                tuple(names), tuple(sorted(options.items())))
 
 
 def decided(key, claim, robot, setting, task, ours, paper, parts: list[Part], figure="") -> Check:

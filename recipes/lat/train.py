@@ -21,6 +21,8 @@ def main(run) -> float:
     trained = run.stage(plan.gait_policy, library)                # pi(t, z) and one z per expert (III-B)
     low_level = make_low_level(run, trained)                      # z -> N joint targets, open loop
     run.stage(plan.gait_policy_check, low_level(1), library)      # pi(., z_g) walks like expert g
+    if plan.latent_continuity:                                    # optional: CoM motion over a lattice of z (Fig. 4)
+        run.stage(plan.latent_continuity, low_level(1))
 
     for setting in plan.settings:                                 # normal, legs_disabled: the CoM model of each
         data = run.stage(setting.data, low_level)                 # random z held one action each (III-C)

@@ -22,12 +22,13 @@ def checks(c: config.Checker, robot) -> None:
 
 
 def plan(cfg, robot) -> Plan:
-    """Experts -> gait policy -> its check -> per setting: dynamics data, model, one evaluation per task."""
+    """Experts -> gait policy -> its check (-> the latent space's continuity) -> per setting: dynamics data, model, one evaluation per task."""
     from hierloco.envs.robots import robot_fingerprint
 
     experts = stages.experts_stage(cfg, robot_fingerprint(robot))
     policy = stages.gait_policy_stage(cfg, experts)
     return Plan(experts=experts, gait_policy=policy, gait_policy_check=stages.gait_policy_check_stage(cfg, policy),
+                latent_continuity=stages.latent_continuity_stage(cfg, policy),  # None unless eval.latent_continuity
                 settings=stages.per_setting_stages(cfg, stages.latent_low_level(policy), robot))
 
 

@@ -35,8 +35,8 @@ import numpy as np
 import yaml
 
 from hierloco import stats
-from hierloco.evidence import (Run, adopt_configs, distinct, read_findings, read_records, read_table, replicates,
-                               rows_of, seed_values, select)
+from hierloco.evidence import (Run, adopt_configs, distinct, read_findings, read_records, read_stage_reports,
+                               read_table, replicates, rows_of, seed_values, select)
 from hierloco.io import write_text
 from recipes.ablations import paper_check as ablation_check
 from recipes.compare import paper_check as compare_check
@@ -83,7 +83,10 @@ STUDIES = (
                   "out_dir=results/sample_efficiency"),
     Study("navigation", ("navigation/records",),
           command="python recipes/navigation/run.py records=results/navigation/records out_dir=results/navigation"),
+    Study("latent_map", ("latent_map/records",),
+          command="python recipes/latent_map/run.py records=results/latent_map/records out_dir=results/latent_map"),
 )
+CONTINUITY_STAGE = "latent_continuity"  # the stage whose report the latent-space claim reads
 # comparison tables of earlier runs of compare_full's study, kept without records (per-episode rows only): declared
 # the same configurations as compare_full's records with the same labels (hierloco.evidence.adopt_configs)
 ARCHIVED = ("compare_model_based", "compare_model_based_rerun", "compare_seed0_with_sac")
@@ -108,6 +111,7 @@ class Evidence:
     sources: dict[str, str] = field(default_factory=dict)
     archived: list[Run] = field(default_factory=list)
     compute_tables: dict[str, dict] = field(default_factory=dict)
+    continuity: list[dict] = field(default_factory=list)  # the latent_continuity reports (recipes/latent_map)
 
     def pooled(self) -> list[Run]:
         """The runs of the paper's configurations (robot's own profile, the paper preset's sizes) from every study
@@ -146,6 +150,8 @@ def load(results: Path, names: dict | None = None) -> Evidence:
                                          if not study.robot or r.robot == study.robot]
             evidence.findings[study.name] = read_findings(found)
             evidence.sources[study.name] = _shown(found, results)
+            if study.name == "latent_map":
+                evidence.continuity = read_stage_reports(found, CONTINUITY_STAGE)
         elif study.table and (table := locate(results, study.table)) is not None:
             evidence.runs[study.name] = [r for r in read_table(table, folder=study.name)
                                          if not study.robot or r.robot == study.robot]
@@ -363,6 +369,33 @@ def navigation_checks(runs: list[Run]) -> list[Check]:
     return checks
 
 
+CONTINUITY_EFFECT = 0.5  # neighbours must differ by at most half what the average pair of lattice points does
+
+
+def continuity_checks(reports: list[dict]) -> list[Check]:
+    """The latent-space claim per robot, over seeds (Sec. III-B, Fig. 4): on a lattice of latents held from
+    standing, the CoM velocities of lattice neighbours differ significantly less than those of all pairs, by at
+    least half (``CONTINUITY_EFFECT``; a linear map on a 7-point lattice gives about a third, a map that jumps
+    between neighbours about 1), paired by seed."""
+    checks = []
+    for robot in sorted({r["robot"] for r in reports if r["method"] == "lat"}):
+        mine = sorted((r for r in reports if r["method"] == "lat" and r["robot"] == robot), key=lambda r: r["seed"])
+        near = np.array([r["neighbour_difference"] for r in mine], dtype=float)
+        pair = np.array([r["pair_difference"] for r in mine], dtype=float)
+        ratio = near / pair
+        ours = (f"neighbours {near.mean():.3f} +- {near.std():.3f} m/s, all pairs {pair.mean():.3f} +- "
+                f"{pair.std():.3f} m/s (ratio {ratio.mean():.2f} +- {ratio.std():.2f}; n={len(mine)}; "
+                f"{mine[0]['grid']}-point lattice over a {mine[0]['latent_dim']}-D latent, "
+                f"{100 * np.mean([r['fell_fraction'] for r in mine]):.0f} % fell)")
+        checks.append(compare_check.decided(
+            "latent_continuity", "Latents one lattice step apart move the CoM alike: their velocities differ by at "
+            f"most {CONTINUITY_EFFECT:.0%} of what the average pair's do", robot, "normal", "latent lattice", ours,
+            "-", [compare_check.part("neighbours vs all pairs", near, pair, "better", paired=True,
+                                     names=("neighbour velocity difference (m/s)", "pair velocity difference (m/s)"),
+                                     options={"min_effect_rel": CONTINUITY_EFFECT})], "Sec. III-B, Fig. 4"))
+    return checks
+
+
 def _goals(runs, method, setting) -> str:
     """How many goals the runs reached, and in how many steps."""
     chosen = distinct(select(runs, method=method, setting=setting, task="goal_reaching"))
@@ -391,6 +424,8 @@ def study_checks(evidence: Evidence) -> dict[str, list[Check]]:
                          if name == "ablations" or c.verdict != NOT_MEASURED]  # no_turn varies the latent only
     if "navigation" in runs:
         out["navigation"] = navigation_checks(runs["navigation"])
+    if evidence.continuity:
+        out["latent_map"] = continuity_checks(evidence.continuity)
     return out
 
 
@@ -497,14 +532,13 @@ def _figure_claims():
         ("\"Our method can directly be used with waypoint navigation methods to reach a desired goal\" (ours: "
          "cluttered arenas, an A* path inflated by the robot's footprint, LAT's trajectory tracking along it)",
          "Sec. I; Fig. 2 (Daisy in iGibson)", "-", ("navigation", "navigation")),
+        ("\"Close-by samples in the latent space lead to continuously varying CoM motion\" (ours: a lattice of 2-D "
+         "latents over the learned box, each held from standing; neighbours' CoM velocities against all pairs')",
+         "Sec. III-B; Fig. 4", "-", ("latent_map", "latent_continuity")),
     ]
 
 
 NOT_MEASURED_YET = [
-    ("\"Close-by samples in the latent space lead to continuously varying CoM motion\"", "Sec. III-B; Fig. 4",
-     "a latent-space study with records: CoM velocity against latent distance on a grid of latents, per robot and "
-     "seed (the figure, one seed per robot, is in `latent_map/`: neighbouring latents walk in neighbouring "
-     "directions; no test over seeds yet)"),
     ("\"Our learned latent space can induce gait transitions in the low-level if needed by the task\", on both "
      "robots and hardware", "Sec. V; Fig. 9",
      "a test of the claim itself over seeds (`gaits/`: the planner switches gait every few actions on both robots; "
@@ -609,6 +643,7 @@ def paper_checks(evidence: Evidence) -> dict[str, list[Check]]:
         out["adverse"] = adverse_checks(evidence.runs["adverse"], evidence.findings.get("adverse", []))
     out["sample_efficiency"] = sample_efficiency_checks(evidence)
     out["navigation"] = navigation_checks(evidence.runs.get("navigation", []))
+    out["latent_map"] = continuity_checks(evidence.continuity)
     return out
 
 
@@ -630,7 +665,7 @@ def _folder_of(source: str, check: Check) -> str:
                                              for part in check.parts for name in part.names):
         return "compare_full"   # the full budgets are the comparison's runs (sample_efficiency_checks)
     return {"pooled": "pooled", "ablations": "ablations", "adverse": "adverse",
-            "sample_efficiency": "sample_efficiency", "navigation": "navigation"}[source]
+            "sample_efficiency": "sample_efficiency", "navigation": "navigation", "latent_map": "latent_map"}[source]
 
 
 def paper_page(evidence: Evidence, checks: dict[str, list[Check]]) -> str:
@@ -740,7 +775,7 @@ def seeds_for(check: Check, study: str, reason: str, section: str = "paper") -> 
     if any(np.ndim(v) and len(v) < 2 for part in undecided for v in (part.a, part.b)):
         return Need(check, study, None, sides, reason, section, spread_unknown=True)
     for part in undecided:
-        n = stats.seeds_needed(part.a, part.b, kind=part.kind, paired=part.paired)
+        n = stats.seeds_needed(part.a, part.b, kind=part.kind, paired=part.paired, **dict(part.options))
         counts.append(n)
         d, threshold = part.decision.estimate, part.decision.threshold
         if (part.kind == "better" and d < threshold) or (part.kind == "close" and abs(d) > threshold):

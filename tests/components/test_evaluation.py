@@ -166,3 +166,37 @@ def test_metrics_plan_time_and_bad_episodes(library):
     np.testing.assert_array_equal(unrecorded.result.com_states, rollout.result.com_states)
     with pytest.raises(ValueError, match="2 robots for 3 episodes"):
         run_task(LatentActionEnv(low, num_robots=2), policy, GoalReaching(), episodes=[0, 1, 2])
+
+
+def test_latent_grid_spans_the_box_with_the_last_axis_fastest():
+    from hierloco.components.evaluation import latent_grid
+
+    index, latents = latent_grid([-0.5, 0.0, 1.0], [0.5, 2.0, 3.0], 5)
+    assert index.shape == latents.shape == (125, 3)
+    assert np.allclose(latents.min(0), [-0.5, 0.0, 1.0]) and np.allclose(latents.max(0), [0.5, 2.0, 3.0])
+    assert np.allclose(latents[1] - latents[0], [0.0, 0.0, 0.5])
+
+
+def test_continuity_statistics_tell_a_smooth_map_from_a_jumping_one():
+    """A velocity that varies linearly over a 7 x 7 lattice gives neighbours about a third of the average pair's
+    difference; the same velocities shuffled over the lattice give about the same as any pair; pairs with a fallen
+    robot are left out."""
+    from hierloco.components.evaluation import continuity_statistics, latent_grid
+
+    index, latents = latent_grid([-1.0, -1.0], [1.0, 1.0], 7)
+    smooth = 0.3 * latents
+    shuffled = smooth[np.random.default_rng(0).permutation(len(smooth))]
+    walking = np.zeros(len(index), bool)
+    linear = continuity_statistics(index, smooth, walking)
+    jumping = continuity_statistics(index, shuffled, walking)
+    assert 0.25 < linear["ratio"] < 0.4 and jumping["ratio"] > 0.8
+    assert np.isclose(linear["neighbour_difference"], 0.3 * 2 / 6)  # one lattice step along one axis
+    assert linear["neighbour_pairs"] == 2 * 7 * 6 and linear["pairs"] == 49 * 48 // 2
+    fell = walking.copy()
+    fell[0] = True
+    smooth_fallen = smooth.copy()
+    smooth_fallen[0] = [5.0, 5.0]  # a fallen robot's velocity is not the latent's: never counted
+    dropped = continuity_statistics(index, smooth_fallen, fell)
+    assert dropped["pairs"] == 48 * 47 // 2 and dropped["neighbour_pairs"] == 2 * 7 * 6 - 2
+    assert np.isclose(dropped["neighbour_difference"], linear["neighbour_difference"])
+    assert np.isclose(dropped["fell_fraction"], 1 / 49)

@@ -33,6 +33,8 @@ MISTAKES = [
     ("+experts.command_low=[0.5,0,0]", "experts: command_low [0.5, 0.0, 0.0] must be at most command_high"),
     ("+experts.command_high=[1,2]", "experts: command_high must be 3 finite numbers"),
     ("checks.min_reproduced_fraction=1.5", "checks.min_reproduced_fraction must be a number in [0, 1], got 1.5"),
+    ("eval.latent_continuity={grid: 1}", "eval.latent_continuity.grid must be an integer >= 2, got 1"),
+    ("eval.latent_continuity={grid: 7, sizes: 3}", "eval.latent_continuity must be null or a mapping of grid"),
 ]
 
 

@@ -138,3 +138,30 @@ def test_navigation_is_decided_over_seeds_on_cost_and_goal_error(tmp_path):
     assert "**does not hold**" in rows["daisy"] and "goals reached 0/6" in rows["daisy"]
     assert "closest CoM to a box 0.30 m" in rows["a1"]
     assert "(no runs of the study it needs: `navigation`)" not in paper
+
+
+def test_latent_continuity_is_decided_over_seeds_from_the_stage_s_reports(tmp_path):
+    """Daisy's lattice neighbours differ by a third of the average pair's velocity difference: holds; A1's by 90 %
+    of it (a map that jumps between neighbours): does not hold. The numbers come from each record's
+    ``latent_continuity`` report; a record without that stage is not read as one."""
+    results = results_tree(tmp_path / "results")
+    assert "(no runs of the study it needs: `latent_map`)" in pages(load(results))["paper_check.md"]
+    jobs = results / "latent_map" / "records"
+    for robot, ratio in (("daisy", 0.33), ("a1", 0.9)):
+        for seed in range(3):
+            pair = 0.30 + 0.02 * seed
+            measured = {"neighbour_difference": ratio * pair + 0.003 * seed, "pair_difference": pair, "grid": 7,
+                        "latent_dim": 2, "fell_fraction": 0.0, "ratio": ratio}
+            write_record(jobs, f"lat/paper/{robot}_seed{seed}", method="lat", robot=robot, seed=seed,
+                         costs={("normal", "velocity_tracking"): [0.2]}, report={"latent_continuity": measured})
+    write_record(jobs, "lat/paper/daisy_seed9", method="lat", robot="daisy", seed=9,
+                 costs={("normal", "velocity_tracking"): [0.2]})  # planned no latent_continuity stage
+    evidence = load(results)
+    assert sorted(r["seed"] for r in evidence.continuity if r["robot"] == "daisy") == [0, 1, 2]
+    written = pages(evidence)
+    paper = written["paper_check.md"]
+    rows = {line.split(" | ")[0][2:]: line for line in paper.splitlines() if "| latent lattice |" in line}
+    assert "**holds**" in rows["daisy"] and "min effect 0.160" in rows["daisy"]  # half of the pairs' 0.32 m/s
+    assert "**does not hold**" in rows["a1"]
+    assert "ratio 0.34 +- 0.01; n=3" in written["latent_map/verdicts.md"]
+    assert "(no runs of the study it needs: `latent_map`)" not in paper
