@@ -71,8 +71,9 @@ STUDIES = (
           command="python recipes/adverse/run.py records=results/adverse/records out_dir=results/adverse"),
     Study("hardware_a1", ("hardware_a1/records",),
           command="python recipes/hardware/run.py 'robots=[a1]' records=results/hardware_a1/records", robot="a1"),
-    Study("hardware_daisy", (), table="hardware_daisy/hardware.csv",
-          command="python recipes/hardware/run.py 'robots=[daisy]' 'methods=[lat,ik]' 'seeds=[0,1,2]'", robot="daisy"),
+    Study("hardware_daisy", ("hardware_daisy/records",), table="hardware_daisy/hardware.csv",
+          command="python recipes/hardware/run.py 'robots=[daisy]' 'methods=[lat,ik]' 'seeds=[0,1,2,3,4]' "
+                  "records=results/hardware_daisy/records out_dir=results/hardware_daisy", robot="daisy"),
     Study("ablations", ("ablations/records",),
           command="python recipes/ablations/run.py records=results/ablations/records out_dir=results/ablations"),
     Study("ablations/no_turn", ("ablations/no_turn/records",),
