@@ -1,4 +1,4 @@
-"""Expert libraries over several gaits, and telling a gait from its foot contacts (Li et al., Sec. VI: "when the
+"""Expert libraries over several gaits, and telling a gait from its foot contacts (Li et al., Sec. V: "when the
 low-level policy is learned with experts spanning multiple gaits, the high-level latent action space can be used to
 transit between gaits").
 
@@ -58,29 +58,62 @@ def check_gaits(robot: str | RobotSpec, gaits: Mapping[str, GaitGroups]) -> list
     return problems
 
 
+def check_gait_boxes(robot: str | RobotSpec, gaits: Mapping[str, GaitGroups],
+                     gait_boxes: Mapping[str, Mapping[str, Sequence[float]]] | None) -> list[str]:
+    """A problem line per entry of ``gait_boxes`` (gait name -> ``{command_low: [vx, vy, yaw_rate], command_high:
+    [...]}``, either bound optional) that names no gait of ``gaits``, has other keys, or is not a command box of the
+    robot (:func:`hierloco.components.expert_library.command_box`); empty when every box is valid."""
+    from hierloco.components.expert_library import command_box
+
+    robot = get_robot(robot)
+    problems = []
+    for name, box in (gait_boxes or {}).items():
+        if name not in gaits:
+            problems.append(f"gait_boxes names {name!r}, which is not one of the gaits ({', '.join(gaits)})")
+            continue
+        if not isinstance(box, Mapping) or set(box) - {"command_low", "command_high"}:
+            problems.append(f"gait_boxes.{name} must be {{command_low: [vx, vy, yaw_rate], command_high: [...]}}, "
+                            f"got {box!r}")
+            continue
+        try:
+            command_box(robot, box.get("command_low"), box.get("command_high"))
+        except ValueError as error:
+            problems.append(f"gait_boxes.{name}: {error}")
+    return problems
+
+
 def build_gait_library(robot: str | RobotSpec, gaits: Mapping[str, GaitGroups], num_experts: int, *, seed: int = 0,
-                       **options):
+                       gait_boxes: Mapping[str, Mapping[str, Sequence[float]]] | None = None, **options):
     """An expert library over ``gaits`` (name -> gait groups): ``num_experts`` split as evenly as possible between
     them in the order of their names, each gait's experts built by :func:`hierloco.components.expert_library.
-    build_expert_library` (``options``: its keyword arguments) with seed ``seed + index``. The library is the robot's
-    own (its metadata names ``robot``, not the gait's copy) and adds ``gaits``, ``expert_gaits`` (one name per
-    expert) and ``leg_names``."""
+    build_expert_library` (``options``: its keyword arguments) with seed ``seed + index``. ``gait_boxes`` (gait name
+    -> ``{command_low, command_high}``) gives a gait a command box of its own in place of ``options``' (e.g. a slow
+    gait that only walks slowly, so that a fast target needs the other gait); the library's ``command_low`` /
+    ``command_high`` are then the smallest box holding every gait's, and ``gait_boxes`` records each gait's. The
+    library is the robot's own (its metadata names ``robot``, not the gait's copy) and adds ``gaits``,
+    ``expert_gaits`` (one name per expert) and ``leg_names``."""
     from hierloco.components.expert_library import (
-        ExpertLibrary, ExpertQualityError, build_expert_library, diagnose_expert_library, robot_metadata,
+        ExpertLibrary, ExpertQualityError, build_expert_library, command_box, diagnose_expert_library, robot_metadata,
     )
 
     robot = get_robot(robot)
-    problems = check_gaits(robot, gaits)
+    problems = check_gaits(robot, gaits) + check_gait_boxes(robot, gaits, gait_boxes)
     if problems:
         raise ValueError("; ".join(problems))
+    gait_boxes = dict(gait_boxes or {})
     gaits = dict(sorted(gaits.items()))  # by name: the library does not depend on the order a config lists them
     counts = [len(part) for part in np.array_split(np.arange(int(num_experts)), len(gaits))]
     if min(counts) < 1:
         raise ValueError(f"{num_experts} experts cannot be split between {len(gaits)} gaits")
-    parts = []
+    parts, boxes = [], {}
     for index, ((name, groups), count) in enumerate(zip(gaits.items(), counts)):
+        own = gait_boxes.get(name, {})
+        low, high = command_box(robot, own.get("command_low", options.get("command_low")),
+                                own.get("command_high", options.get("command_high")))
+        boxes[name] = {"command_low": low.tolist(), "command_high": high.tolist()}
         try:
-            parts.append(build_expert_library(gait_robot(robot, groups), count, seed=seed + index, **options))
+            parts.append(build_expert_library(gait_robot(robot, groups), count, seed=seed + index,
+                                              **{**options, **boxes[name]}))
         except ExpertQualityError as error:  # the same finding, saying which gait
             raise ExpertQualityError(f"gait {name!r} ({count} experts): {error}") from None
     arrays = {field: np.concatenate([getattr(part, field) for part in parts])
@@ -94,6 +127,10 @@ def build_gait_library(robot: str | RobotSpec, gaits: Mapping[str, GaitGroups], 
                 "gaits": {name: [list(group) for group in groups] for name, groups in gaits.items()},
                 "expert_gaits": [name for name, count in zip(gaits, counts) for _ in range(count)],
                 "leg_names": [leg.name for leg in robot.legs]}
+    if gait_boxes:  # each gait's own box, and the library's: the smallest box holding them all
+        metadata["gait_boxes"] = boxes
+        metadata["command_low"] = np.min([box["command_low"] for box in boxes.values()], axis=0).tolist()
+        metadata["command_high"] = np.max([box["command_high"] for box in boxes.values()], axis=0).tolist()
     library = ExpertLibrary(**arrays, metadata=metadata)
     library.metadata["tracking"] = diagnose_expert_library(library, robot=robot).summary()
     return library

@@ -61,7 +61,7 @@ class GaitPolicyQualityError(Finding, ValueError):
 
 # ---------------------------------------------------------------------------------------------------- experts
 # Options added after runs were recorded, keyed only when they differ from these defaults (docs/pipeline.md).
-EXPERTS_DEFAULTS = {"tune": False, "tune_budget": 300.0, "gaits": None, "max_failed_experts": None}
+EXPERTS_DEFAULTS = {"tune": False, "tune_budget": 300.0, "gaits": None, "gait_boxes": None, "max_failed_experts": None}
 POLICY_DEFAULTS = {"adaptive": False, "budget_epochs": None}
 
 
@@ -88,7 +88,8 @@ def build_experts(run, params) -> ExpertLibrary:
         if params.get("gaits"):  # experts over several gaits, one gait policy over all (hierloco.components.gaits)
             from hierloco.components.gaits import build_gait_library
 
-            return build_gait_library(run.robot, params["gaits"], params["num_experts"], **options)
+            return build_gait_library(run.robot, params["gaits"], params["num_experts"],
+                                      gait_boxes=params.get("gait_boxes"), **options)
         return build_expert_library(run.robot, params["num_experts"], **options)
 
 

@@ -1,4 +1,4 @@
-"""Gait transitions (Li et al., RA-L 2021, Sec. VI, Fig. 9): LAT learned from experts over several gaits, against LAT
+"""Gait transitions (Li et al., RA-L 2021, Sec. V, Fig. 9): LAT learned from experts over several gaits, against LAT
 with the robot's own gait; which gait the planner picks for each latent action, and where it switches.
 
     python recipes/gaits/run.py records=results/gaits/records out_dir=results/gaits      # A1, paper scale, 3 seeds
@@ -61,9 +61,25 @@ def check(cfg):
     if not (isinstance(cfg.diagrams, int) and cfg.diagrams >= 0):
         problems.append(f"diagrams must be an integer >= 0, got {cfg.diagrams!r}")
     problems += profile_problems(cfg)
+    if robots and cfg.get("gait_boxes") is not None:
+        from hierloco.components.gaits import check_gait_boxes
+
+        if not OmegaConf.is_dict(cfg.gait_boxes):
+            problems.append(f"gait_boxes must map gait names to {{command_low: [...], command_high: [...]}}, got "
+                            f"{cfg.gait_boxes!r}")
+        else:
+            problems += check_gait_boxes(robots[0], gaits, boxes_of(cfg))
+    tag = cfg.get("tag")
+    if tag is not None and not (isinstance(tag, str) and tag.replace("_", "").isalnum() and tag.isascii()):
+        problems.append(f"tag must be letters, digits and underscores (it names the run directories), got {tag!r}")
     if problems:
         raise ConfigError("bad config: " + "; ".join(problems))
     return robots[0]
+
+
+def boxes_of(cfg) -> dict:
+    """The gaits' own command boxes (``gait_boxes``: gait -> ``{command_low, command_high}``), empty when null."""
+    return OmegaConf.to_container(cfg.gait_boxes, resolve=True) if cfg.get("gait_boxes") is not None else {}
 
 
 def gaits_override(gaits: dict) -> str:
@@ -107,12 +123,15 @@ def jobs(cfg, spec) -> tuple[list, list]:
     planned, profiled = [], []
     label = f"{len(gaits_of(cfg))} gaits"
     profile = profile_of(cfg)
+    tag = f"_{cfg.tag}" if cfg.get("tag") else ""  # the several-gait runs' directories, e.g. daisy_seed0_speeds
+    boxes = [f"experts.gait_boxes={override_value(dict(sorted(boxes_of(cfg).items())))}"] if boxes_of(cfg) else []
     for seed in cfg.seeds:
         own = comparison_job("lat", spec, seed, preset=cfg.preset_name, settings=["normal", "legs_disabled"])
         own.labels, own.records_from = {"method": f"own gait ({cfg.own})"}, cfg.compare_records
-        several = studies.Job("lat", str(Path(cfg.runs_dir) / f"{spec.name}_seed{seed}"),
+        several = studies.Job("lat", str(Path(cfg.runs_dir) / f"{spec.name}_seed{seed}{tag}"),
                               [f"preset={cfg.preset_name}", f"robot={spec.reference}", f"seed={seed}",
-                               "settings=[normal]", "progress=false", *cfg.overrides, gaits_override(gaits_of(cfg))],
+                               "settings=[normal]", "progress=false", *cfg.overrides, gaits_override(gaits_of(cfg)),
+                               *boxes],
                               labels={"method": label})
         planned += [own, several]
         if not profile:
@@ -124,7 +143,7 @@ def jobs(cfg, spec) -> tuple[list, list]:
         profiled += [
             studies.Job("lat", str(Path(cfg.runs_dir) / f"{spec.name}_seed{seed}_own_profile"),
                         [*own_normal.overrides, *on_profile], labels=dict(own.labels), reuse_from=own_source),
-            studies.Job("lat", str(Path(cfg.runs_dir) / f"{spec.name}_seed{seed}_profile"),
+            studies.Job("lat", str(Path(cfg.runs_dir) / f"{spec.name}_seed{seed}{tag}_profile"),
                         [*several.overrides, *on_profile], labels=dict(several.labels), reuse_from=several.run_dir)]
     return planned, profiled
 
@@ -265,6 +284,7 @@ def profile_rows(cfg, results, *, several: str, gaits: dict) -> list[dict]:
     import torch
 
     found = []
+    top = top_speeds(cfg) if boxes_of(cfg) else {}
     for result in results:
         if not result.ok:
             continue
@@ -279,9 +299,79 @@ def profile_rows(cfg, results, *, several: str, gaits: dict) -> list[dict]:
                           else [""] * task.num_steps)
                 found += [{"seed": seed_of(result.job), "method": result.job.labels["method"], "task": name,
                            "episode": episode, "action": a, "target_speed": round(float(np.linalg.norm(target)), 4),
-                           "speed": round(float(speed), 4), "gait": gait}
+                           "speed": round(float(speed), 4), "gait": gait,
+                           **({"needed": needed_at(top, float(np.linalg.norm(target)))} if top else {})}
                           for a, (target, speed, gait) in enumerate(zip(targets, speeds, labels))]
     return found
+
+
+NEEDED_GAIT_EFFECT = 0.2  # the least rise in the share of the gaits a target needs that counts (docs/gaits.md)
+
+
+def top_speeds(cfg) -> dict[str, float]:
+    """Each gait's fastest planar command (m/s): the corner of its command box (its own in ``gait_boxes``, else the
+    robot's) farthest from standing in ``(vx, vy)``; a target faster than that needs another gait."""
+    from hierloco.components.expert_library import command_box
+    from hierloco.envs.robots import get_robot
+
+    robot, boxes, out = get_robot(cfg.robot), boxes_of(cfg), {}
+    for name in gaits_of(cfg):
+        low, high = command_box(robot, boxes.get(name, {}).get("command_low"), boxes.get(name, {}).get("command_high"))
+        out[name] = float(max(np.hypot(x, y) for x in (low[0], high[0]) for y in (low[1], high[1])))
+    return out
+
+
+def needed_at(top: dict[str, float], speed: float) -> str:
+    """The gaits whose commands reach ``speed`` (m/s; ``top``: :func:`top_speeds`), sorted and joined by ``|``."""
+    return "|".join(sorted(name for name, fastest in top.items() if fastest >= speed - 1e-9))
+
+
+def needed_gait_shares(found: list[dict], several: str) -> dict[int, tuple[float, float]]:
+    """Per seed, from profile rows with a ``needed`` column (:func:`profile_rows` with ``gait_boxes``): the share of
+    the several-gait runs' actions at the targets only some gaits reach that walk one of those gaits, and the share
+    of the actions in the same gaits at the targets every gait reaches. Empty when no target needs a gait."""
+    mine = [r for r in found if r["method"] == several and r.get("needed")]
+    every = max((set(r["needed"].split("|")) for r in mine), key=len, default=set())
+    needing = [r for r in mine if set(r["needed"].split("|")) < every]
+    wanted = set().union(*(set(r["needed"].split("|")) for r in needing))
+    shares = {}
+    for seed in sorted({int(r["seed"]) for r in needing}):
+        fast = [r["gait"] in r["needed"].split("|") for r in needing if int(r["seed"]) == seed]
+        slow = [r["gait"] in wanted for r in mine if int(r["seed"]) == seed and set(r["needed"].split("|")) == every]
+        shares[seed] = (float(np.mean(fast)), float(np.mean(slow)) if slow else float("nan"))
+    return shares
+
+
+def decide_needed_gait(shares: dict[int, tuple[float, float]]):
+    """"The planner picks the gait a target needs": over seeds, the share of the actions in the needed gaits at the
+    targets that need them is higher than those gaits' share where any gait will do, by at least
+    :data:`NEEDED_GAIT_EFFECT` (one-sided paired Welch, ``docs/statistics.md``; as costs, one minus the shares)."""
+    from hierloco.stats import decide_better
+
+    fast = [1.0 - shares[seed][0] for seed in sorted(shares)]
+    slow = [1.0 - shares[seed][1] for seed in sorted(shares)]
+    return decide_better(fast, slow, paired=True, min_effect_rel=0.0, min_effect_abs=NEEDED_GAIT_EFFECT,
+                         not_testable=float("inf"))
+
+
+def needed_gait_markdown(found: list[dict], several: str, top: dict[str, float]) -> list[str]:
+    """The section of ``profile.md`` on the gait a target needs (with ``gait_boxes``): each gait's fastest command,
+    the targets that need a gait, per seed the shares, and :func:`decide_needed_gait`."""
+    shares = needed_gait_shares(found, several)
+    if not shares:
+        return []
+    needing = sorted({(r["target_speed"], r["needed"]) for r in found if r["method"] == several and r.get("needed")
+                      and len(r["needed"].split("|")) < len(top)})
+    lines = ["## The gait the task needs", "",
+             "Each gait's fastest command (its box's corner farthest from standing): "
+             + ", ".join(f"{name} {speed:.2f} m/s" for name, speed in sorted(top.items())) + ". Targets only some "
+             "gaits reach: " + ", ".join(f"{speed:.2f} m/s ({needed.replace('|', ', ')})" for speed, needed in needing)
+             + ".", "", "| seed | the needed gaits' share where they are needed | their share where any gait will do |",
+             "|---|---|---|"]
+    lines += [f"| {seed} | {100 * fast:.0f} % | {100 * slow:.0f} % |" for seed, (fast, slow) in shares.items()]
+    lines += ["", f"The test \"the planner picks the gait a target needs\" (the share higher by at least "
+              f"{NEEDED_GAIT_EFFECT:.0%}, paired over seeds): {decide_needed_gait(shares).text()}.", ""]
+    return lines
 
 
 def segments(targets: list[float]) -> list[tuple[int, int]]:
@@ -290,11 +380,13 @@ def segments(targets: list[float]) -> list[tuple[int, int]]:
     return list(zip(bounds, bounds[1:]))
 
 
-def profile_markdown(found: list[dict], costs: list[dict], gaits: dict, *, own: str, several: str, title: str) -> str:
+def profile_markdown(found: list[dict], costs: list[dict], gaits: dict, *, own: str, several: str, title: str,
+                     top: dict[str, float] | None = None) -> str:
     """Per profile task: per stretch of one target speed, each gait's share of the several-gait runs' actions, their
     switches, and the CoM's speed along the target with each library; where the switches fall (at a change of
     target or inside a stretch); the normalised cost of both libraries with the test "several gaits cost as little
-    as the own gait" (``docs/statistics.md``)."""
+    as the own gait" (``docs/statistics.md``); with ``top`` (each gait's fastest command, ``gait_boxes``), which
+    targets need a gait and whether the planner picks it (:func:`needed_gait_markdown`)."""
     from hierloco.stats import decide_close
     from recipes.compare.paper_check import seed_means
 
@@ -348,6 +440,8 @@ def profile_markdown(found: list[dict], costs: list[dict], gaits: dict, *, own: 
         lines += [f"| normalised cost | {own} | {several} | verdict |", "|---|---|---|---|",
                   f"| {task.replace('_', ' ')} | {b.mean() if b.size else float('nan'):.3f} | "
                   f"{a.mean() if a.size else float('nan'):.3f} | {verdict} |", ""]
+    if top:
+        lines += needed_gait_markdown(found, several, top)
     return "\n".join(lines)
 
 
@@ -367,7 +461,8 @@ def write_profile(cfg, spec, results, out: Path, *, own: str, several: str) -> N
         return
     write_text(out / "profile.csv", csv_text(found, list(found[0])))
     write_text(out / "profile_costs.csv", csv_text(costs, list(costs[0])))
-    write_text(out / "profile.md", profile_markdown(found, costs, gaits, own=own, several=several, title=title)
+    write_text(out / "profile.md", profile_markdown(found, costs, gaits, own=own, several=several, title=title,
+                                                    top=top_speeds(cfg) if boxes_of(cfg) else None)
                + missing_markdown(results))
     print((out / "profile.md").read_text())
     first = next((r for r in results if r.ok and r.job.labels["method"] == several), None)

@@ -61,6 +61,8 @@ class Study:
     table: str = ""
     command: str = ""
     robot: str = ""     # only this robot's runs (a records folder may hold other robots')
+    gait_profile: str = ""  # a gait study's speed-profile table (one row per action, its gait and the gaits its
+                            # target needs: recipes/gaits), read in place of records
 
 
 STUDIES = (
@@ -86,6 +88,11 @@ STUDIES = (
           command="python recipes/navigation/run.py records=results/navigation/records out_dir=results/navigation"),
     Study("latent_map", ("latent_map/records",),
           command="python recipes/latent_map/run.py records=results/latent_map/records out_dir=results/latent_map"),
+    Study("gaits/daisy_speeds", gait_profile="gaits/daisy_speeds/profile.csv", robot="daisy",
+          command="python recipes/gaits/run.py robot=daisy own=tripod '~gaits' '+gaits={tripod: [[FL, MR, RL], "
+                  "[FR, ML, RR]], ripple: [[FL, MR], [ML, RR], [RL, FR]]}' 'gait_boxes={ripple: {command_low: "
+                  "[-0.1, -0.1, -0.2], command_high: [0.1, 0.1, 0.2]}}' tag=speeds records=results/gaits/records "
+                  "out_dir=results/gaits/daisy_speeds"),
 )
 CONTINUITY_STAGE = "latent_continuity"  # the stage whose report the latent-space claim reads
 # comparison tables of earlier runs of compare_full's study, kept without records (per-episode rows only): declared
@@ -113,6 +120,7 @@ class Evidence:
     archived: list[Run] = field(default_factory=list)
     compute_tables: dict[str, dict] = field(default_factory=dict)
     continuity: list[dict] = field(default_factory=list)  # the latent_continuity reports (recipes/latent_map)
+    gait_profiles: dict[str, list[dict]] = field(default_factory=dict)  # study -> its speed-profile rows
 
     def pooled(self) -> list[Run]:
         """The runs of the paper's configurations (robot's own profile, the paper preset's sizes) from every study
@@ -146,7 +154,14 @@ def load(results: Path, names: dict | None = None) -> Evidence:
     names = method_names() if names is None else dict(names)
     for study in STUDIES:
         found = next((p for p in (locate(results, r) for r in study.records) if p is not None), None)
-        if found is not None:
+        if study.gait_profile:
+            if (table := locate(results, study.gait_profile)) is not None:
+                from hierloco.results import read_csv
+
+                evidence.gait_profiles[study.name] = [{**row, "robot": study.robot} for row in read_csv(table)]
+                evidence.sources[study.name] = (_shown(table, results) + " (the gait study's table of every "
+                                                "action, made from its runs' evaluations: no records)")
+        elif found is not None:
             evidence.runs[study.name] = [r for r in read_records(found, folder=study.name)
                                          if not study.robot or r.robot == study.robot]
             evidence.findings[study.name] = read_findings(found)
@@ -397,6 +412,39 @@ def continuity_checks(reports: list[dict]) -> list[Check]:
     return checks
 
 
+def gait_checks(rows: list[dict]) -> list[Check]:
+    """The gait-transition claim on a speed profile (Sec. V, Fig. 9), from a gait study's profile rows with the
+    gaits each target needs (``recipes/gaits``, ``gait_boxes``): per seed, the share of actions in the needed gaits
+    where only they reach the target against their share where any gait will do, higher by at least
+    ``NEEDED_GAIT_EFFECT`` (paired by seed; :func:`recipes.gaits.run.decide_needed_gait`)."""
+    from recipes.gaits.run import NEEDED_GAIT_EFFECT, needed_gait_shares
+
+    checks = []
+    for robot in sorted({r["robot"] for r in rows}):
+        mine = [r for r in rows if r["robot"] == robot]
+        several = next((r["method"] for r in mine if r["gait"]), None)
+        shares = needed_gait_shares(mine, several) if several else {}
+        if not shares:
+            continue
+        fast = np.array([shares[seed][0] for seed in sorted(shares)])
+        slow = np.array([shares[seed][1] for seed in sorted(shares)])
+        needed = sorted({(r["target_speed"], r["needed"]) for r in mine if r["method"] == several and r["needed"]
+                         and len(r["needed"].split("|")) < max(len(x["needed"].split("|")) for x in mine)})
+        targets = ", ".join(f"{float(speed):.2f} m/s: {gaits.replace('|', ', ')}" for speed, gaits in needed)
+        ours = (f"the needed gaits' share {100 * fast.mean():.0f} +- {100 * fast.std():.0f} % where only they reach "
+                f"the target ({targets}), {100 * slow.mean():.0f} +- {100 * slow.std():.0f} % where any gait will "
+                f"do (n={len(shares)}; {several})")
+        checks.append(compare_check.decided(
+            "gait_needed", "The planner picks the gait a target needs: where only some gaits reach the target, its "
+            f"actions walk them at least {NEEDED_GAIT_EFFECT:.0%} more often than where any gait will do", robot,
+            "normal", "speed profile", ours, "-",
+            [compare_check.part("where needed vs where any will do", 1.0 - fast, 1.0 - slow, "better", paired=True,
+                                names=("other gaits' share where needed", "other gaits' share where any will do"),
+                                options={"min_effect_rel": 0.0, "min_effect_abs": NEEDED_GAIT_EFFECT,
+                                         "not_testable": math.inf})], "Sec. V, Fig. 9"))
+    return checks
+
+
 def _goals(runs, method, setting) -> str:
     """How many goals the runs reached, and in how many steps."""
     chosen = distinct(select(runs, method=method, setting=setting, task="goal_reaching"))
@@ -427,6 +475,8 @@ def study_checks(evidence: Evidence) -> dict[str, list[Check]]:
         out["navigation"] = navigation_checks(runs["navigation"])
     if evidence.continuity:
         out["latent_map"] = continuity_checks(evidence.continuity)
+    for name, rows in evidence.gait_profiles.items():
+        out[name] = gait_checks(rows)
     return out
 
 
@@ -536,18 +586,14 @@ def _figure_claims():
         ("\"Close-by samples in the latent space lead to continuously varying CoM motion\" (ours: a lattice of 2-D "
          "latents over the learned box, each held from standing; neighbours' CoM velocities against all pairs')",
          "Sec. III-B; Fig. 4", "-", ("latent_map", "latent_continuity")),
+        ("\"Our learned latent space can induce gait transitions in the low-level if needed by the task\" (Fig. 9); "
+         "\"the high-level latent action space can be used to transit between gaits, if needed by the task\" (ours: Daisy's experts in tripod over its whole command box and in a ripple that walks only slowly, one "
+         "latent space over both; a speed profile whose fast targets only the tripod reaches)",
+         "Sec. V; Fig. 9", "-", ("gaits", "gait_needed")),
     ]
 
 
 NOT_MEASURED_YET = [
-    ("\"Our learned latent space can induce gait transitions in the low-level if needed by the task\", on both "
-     "robots and hardware", "Sec. V; Fig. 9",
-     "a test of the claim itself over seeds (`gaits/`: the planner switches gait every few actions on both robots; "
-     "Daisy over tripod and ripple, 3 seeds, is close to the tripod alone at goals and on the path, not at velocity "
-     "tracking; A1 over trot, pace and bound, seeds 0 and 2, costs far more than trot; on a speed profile, 0.05 to "
-     "0.30 m/s and back, it does not pick gaits by speed on either robot (`gaits/profile.md`): the gaits' experts "
-     "cover about the same command box, so no task within it needs a change of gait, and \"if needed by the task\" "
-     "has no task to be tested on here)"),
     ("the same results on the real Daisy (Fig. 8, 10a)", "Sec. IV-D",
      "a real robot: the hardware studies here perturb a simulated copy (mass, motors, friction, latency, CoM "
      "noise), which is what they measure"),
@@ -645,6 +691,7 @@ def paper_checks(evidence: Evidence) -> dict[str, list[Check]]:
     out["sample_efficiency"] = sample_efficiency_checks(evidence)
     out["navigation"] = navigation_checks(evidence.runs.get("navigation", []))
     out["latent_map"] = continuity_checks(evidence.continuity)
+    out["gaits"] = [c for rows in evidence.gait_profiles.values() for c in gait_checks(rows)]
     return out
 
 
@@ -665,6 +712,8 @@ def _folder_of(source: str, check: Check) -> str:
     if source == "sample_efficiency" and any(name.endswith(f":{DEFAULTS['num_transitions']}")
                                              for part in check.parts for name in part.names):
         return "compare_full"   # the full budgets are the comparison's runs (sample_efficiency_checks)
+    if source == "gaits":
+        return next(s.name for s in STUDIES if s.gait_profile and s.robot == check.robot)
     return {"pooled": "pooled", "ablations": "ablations", "adverse": "adverse",
             "sample_efficiency": "sample_efficiency", "navigation": "navigation", "latent_map": "latent_map"}[source]
 

@@ -4,7 +4,9 @@ import numpy as np
 import pytest
 
 from hierloco.components.expert_library import diagnose_expert_library
-from hierloco.components.gaits import build_gait_library, check_gaits, classify_actions, classify_gait, gait_scores
+from hierloco.components.gaits import (
+    build_gait_library, check_gait_boxes, check_gaits, classify_actions, classify_gait, gait_scores,
+)
 from hierloco.envs.robots import get_robot, robot_fingerprint
 
 A1_GAITS = {"trot": [["FR", "RL"], ["FL", "RR"]], "pace": [["FR", "RR"], ["FL", "RL"]],
@@ -60,3 +62,36 @@ def test_a_gait_of_single_legs_cannot_be_told_from_contacts():
     wave = {"tripod": [["L1", "R2", "L3"], ["R1", "L2", "R3"]], "wave": [[leg] for leg in legs]}
     with pytest.raises(ValueError, match="'wave'.*cannot tell"):
         gait_scores(np.ones((10, 6), bool), wave, legs)
+
+
+SLOW = {"command_low": [-0.1, -0.1, -0.2], "command_high": [0.1, 0.1, 0.2]}
+
+
+def test_a_gait_with_a_box_of_its_own_walks_only_its_commands():
+    gaits = {"trot": A1_GAITS["trot"], "pace": A1_GAITS["pace"]}
+    library = build_gait_library("a1", gaits, num_experts=6, seed=0, gait_boxes={"pace": SLOW}, progress=False)
+    a1 = get_robot("a1")
+    pace = np.array(library.metadata["expert_gaits"]) == "pace"
+    assert pace.sum() == 3
+    assert (np.abs(library.commands[pace, :2]) <= 0.1).all() and (np.abs(library.commands[pace, 2]) <= 0.2).all()
+    assert (np.abs(library.commands[~pace, :2]) > 0.1).any()  # trot keeps the robot's whole box
+    assert library.metadata["gait_boxes"] == {"pace": {k: list(map(float, v)) for k, v in SLOW.items()},
+                                              "trot": {"command_low": list(a1.command_low),
+                                                       "command_high": list(a1.command_high)}}
+    # the library's box holds every gait's, and its tracking is diagnosed against it
+    assert library.metadata["command_low"] == list(a1.command_low)
+    assert library.metadata["command_high"] == list(a1.command_high)
+    assert library.metadata["tracking"] == diagnose_expert_library(library, robot=a1).summary()
+
+
+def test_bad_gait_boxes_are_named():
+    problems = check_gait_boxes("a1", A1_GAITS, {"gallop": SLOW, "pace": {"command_low": [0.0, 0.0]},
+                                                 "trot": {"low": [0, 0, 0]},
+                                                 "bound": {"command_low": [0.2, 0, 0], "command_high": [0.1, 0, 0]}})
+    assert problems[0].startswith("gait_boxes names 'gallop', which is not one of the gaits")
+    assert problems[1].startswith("gait_boxes.pace: command_low must be 3 finite numbers")
+    assert problems[2].startswith("gait_boxes.trot must be {command_low")
+    assert problems[3].startswith("gait_boxes.bound: command_low [0.2, 0.0, 0.0] must be at most command_high")
+    assert check_gait_boxes("a1", A1_GAITS, None) == [] and check_gait_boxes("a1", A1_GAITS, {"pace": SLOW}) == []
+    with pytest.raises(ValueError, match="gait_boxes names 'gallop'"):
+        build_gait_library("a1", A1_GAITS, num_experts=3, gait_boxes={"gallop": SLOW}, progress=False)

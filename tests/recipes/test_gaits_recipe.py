@@ -5,7 +5,9 @@ import pytest
 
 from hierloco.components.expert_library import ExpertLibrary
 from hierloco.results import read_csv
-from recipes.gaits.run import action_speeds, profile_markdown, segments
+from recipes.gaits.run import (
+    action_speeds, decide_needed_gait, needed_at, needed_gait_shares, profile_markdown, segments,
+)
 from tests.recipes.test_device_keys import changed, plan
 from tests.runner import run_in_process, run_subprocess
 
@@ -26,6 +28,28 @@ def test_the_gaits_are_in_the_experts_key_and_so_in_every_stage_after_it():
     assert changed("lat", GAITS) == set(plan("lat"))  # the experts, and everything learned from them
 
 
+def test_a_gait_s_own_box_is_in_the_experts_key_only_when_given():
+    boxes = "experts.gait_boxes={pace: {command_low: [-0.1, -0.1, -0.2], command_high: [0.1, 0.1, 0.2]}}"
+    assert "gait_boxes" not in plan("lat", GAITS)["experts"].params
+    assert plan("lat", GAITS, boxes)["experts"].params["gait_boxes"]["pace"]["command_high"] == [0.1, 0.1, 0.2]
+    assert changed("lat", GAITS, boxes) == changed("lat", GAITS)  # relative to the defaults: the same stages
+
+
+BOX = "{command_high: [0.1, 0.1, 0.2]}"
+
+
+@pytest.mark.parametrize("overrides, message", [
+    ((f"experts.gait_boxes={{pace: {BOX}}}",), "set experts.gaits too"),
+    ((GAITS, f"experts.gait_boxes={{gallop: {BOX}}}"), "experts.gait_boxes names 'gallop', which is not one of"),
+])
+def test_a_bad_gait_box_is_one_line_before_any_work(tmp_path, overrides, message):
+    run = tmp_path / "run"
+    result = run_in_process("lat", "preset=tiny", f"run_dir={run}", *overrides, cwd=tmp_path)
+    assert result.returncode == 2 and len(result.lines) == 1, result.stderr
+    assert result.lines[0].startswith("error: ") and message in result.lines[0], result.lines[0]
+    assert not run.exists()
+
+
 def test_a_gait_the_robot_cannot_walk_is_one_line_before_any_work(tmp_path):
     run = tmp_path / "run"
     result = run_in_process("lat", "preset=tiny", f"run_dir={run}",
@@ -42,6 +66,9 @@ def test_a_gait_the_robot_cannot_walk_is_one_line_before_any_work(tmp_path):
     ("+profile.reach={task: goal_reaching}", "profile task 'reach' is a goal_reaching task"),
     ("profile.speed_profile.rounds=0", "profile task 'speed_profile': eval task 'speed_profile': rounds must be"),
     ("own_runs=runs/mlp", "own_runs must be a path holding {seed}"),
+    ("+gait_boxes={gallop: {command_high: [0.1, 0.1, 0.2]}}", "gait_boxes names 'gallop', which is not one of"),
+    ("+gait_boxes={pace: {command_high: [0.1, 0.1]}}", "gait_boxes.pace: command_high must be 3 finite numbers"),
+    ("tag=a/b", "tag must be letters, digits and underscores"),
 ])
 def test_the_gait_study_refuses_a_bad_config_in_one_line(tmp_path, override, message):
     result = run_in_process("gaits", "preset=tiny", "seeds=[0]", override, cwd=tmp_path)
@@ -114,3 +141,49 @@ def test_the_profile_table_counts_gaits_per_target_and_where_the_switches_fall()
     # per seed: share at the fastest target / at the others (bound, pace, trot)
     assert "| 0 | 100 % / 0 % | 0 % / 0 % | 0 % / 100 % |" in text
     assert "| 1 | 50 % / 0 % | 50 % / 50 % | 0 % / 50 % |" in text
+
+
+def profile_found(shares_fast, shares_slow, *, needed_fast="tripod", every="ripple|tripod"):
+    """Profile rows of one several-gait episode per seed: 10 actions at a target only tripod reaches, 10 at one any
+    gait reaches, tripod picked in the given shares."""
+    found = []
+    for seed, (fast, slow) in enumerate(zip(shares_fast, shares_slow)):
+        for a in range(20):
+            at_fast = a < 10
+            share = fast if at_fast else slow
+            gait = "tripod" if (a % 10) < round(10 * share) else "ripple"
+            found.append({"seed": seed, "method": "2 gaits", "task": "speed_profile", "episode": 0, "action": a,
+                          "target_speed": 0.3 if at_fast else 0.05, "speed": 0.1, "gait": gait,
+                          "needed": needed_fast if at_fast else every})
+    return found
+
+
+def test_the_gait_a_target_needs_is_the_one_whose_box_reaches_it():
+    top = {"ripple": 0.141, "tripod": 0.5}
+    assert needed_at(top, 0.05) == "ripple|tripod" and needed_at(top, 0.3) == "tripod" and needed_at(top, 0.6) == ""
+
+
+@pytest.mark.parametrize("fast, slow, verdict", [
+    ((1.0, 0.9, 1.0), (0.3, 0.4, 0.2), "holds"),             # tripod where only it reaches, either elsewhere
+    ((0.5, 0.6, 0.5), (0.5, 0.5, 0.6), "does not hold"),     # the same share wherever the target is
+    ((0.9, 0.3, 0.8), (0.4, 0.5, 0.3), "inconclusive"),      # within the spread of three seeds
+])
+def test_the_planner_picks_the_needed_gait_is_decided_over_seeds(fast, slow, verdict):
+    shares = needed_gait_shares(profile_found(fast, slow), "2 gaits")
+    assert [round(f, 1) for f, _ in shares.values()] == list(fast)
+    assert [round(s, 1) for _, s in shares.values()] == list(slow)
+    assert decide_needed_gait(shares).verdict == verdict
+
+
+def test_the_profile_page_says_which_targets_need_a_gait_and_the_test():
+    found = profile_found((1.0, 0.9, 1.0), (0.3, 0.4, 0.2))
+    text = profile_markdown(found, [], {"ripple": 0, "tripod": 0}, own="own gait (tripod)", several="2 gaits",
+                            title="daisy", top={"ripple": 0.141, "tripod": 0.5})
+    assert "Each gait's fastest command (its box's corner farthest from standing): ripple 0.14 m/s, tripod 0.50" in text
+    assert "Targets only some gaits reach: 0.30 m/s (tripod)." in text
+    assert "| 1 | 90 % | 40 % |" in text and "**holds**" not in text
+    assert 'The test "the planner picks the gait a target needs"' in text and "holds" in text.split("The test")[-1]
+    # without gait boxes no target needs a gait: no such section
+    assert "The gait the task needs" not in profile_markdown(found, [], {"ripple": 0, "tripod": 0},
+                                                              own="own", several="2 gaits", title="daisy")
+    assert needed_gait_shares([{**r, "needed": "ripple|tripod"} for r in found], "2 gaits") == {}

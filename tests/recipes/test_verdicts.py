@@ -165,3 +165,27 @@ def test_latent_continuity_is_decided_over_seeds_from_the_stage_s_reports(tmp_pa
     assert "**does not hold**" in rows["a1"]
     assert "ratio 0.34 +- 0.01; n=3" in written["latent_map/verdicts.md"]
     assert "(no runs of the study it needs: `latent_map`)" not in paper
+
+
+def test_the_gait_a_target_needs_is_decided_from_the_gait_study_s_profile_table(tmp_path):
+    """A speed profile whose fast target only the tripod reaches: the tripod walked at 90-100 % of the actions there
+    and at 20-40 % elsewhere holds; the same share everywhere does not. Read from the gait study's table."""
+    from hierloco.results import csv_text
+    from tests.recipes.test_gaits_recipe import profile_found
+
+    results = results_tree(tmp_path / "results")
+    paper = pages(load(results))["paper_check.md"]
+    assert "(no runs of the study it needs: `gaits`)" in paper
+    table = results / "gaits" / "daisy_speeds" / "profile.csv"
+    table.parent.mkdir(parents=True)
+    for fast, slow, verdict in (((1.0, 0.9, 1.0), (0.3, 0.4, 0.2), "**holds**"),
+                                ((0.5, 0.6, 0.5), (0.5, 0.5, 0.6), "**does not hold**")):
+        found = profile_found(fast, slow)
+        table.write_text(csv_text(found, list(found[0])))
+        written = pages(load(results))
+        row = next(line for line in written["paper_check.md"].splitlines() if "| speed profile |" in line)
+        assert row.startswith("| daisy | normal | speed profile | The planner picks the gait a target needs")
+        assert verdict in row and row.endswith("| gaits/daisy_speeds |"), row
+        assert "gaits/daisy_speeds/verdicts.md" in written
+    study = written["gaits/daisy_speeds/verdicts.md"]
+    assert "0.30 m/s: tripod" in study and "n=3; 2 gaits" in study and "no records" in study
