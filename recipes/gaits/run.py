@@ -286,8 +286,8 @@ def profile_rows(cfg, results, *, several: str, gaits: dict) -> list[dict]:
     found = []
     top = top_speeds(cfg) if boxes_of(cfg) else {}
     for result in results:
-        if not result.ok:
-            continue
+        if not result.ok or (result.source != result.job.run_dir and result.job.labels["method"] != several):
+            continue  # an own-gait job taken from its record keeps no evaluation: its costs only (profile_costs)
         legs, steps = gait_context(result.job)
         for name, options in profile_of(cfg).items():
             task = make_task_from_spec(name, options)
@@ -413,8 +413,8 @@ def profile_markdown(found: list[dict], costs: list[dict], gaits: dict, *, own: 
             shares = " | ".join(f"{100 * chosen.count(name) / max(1, len(chosen)):.0f} %" for name in names)
             lines.append(f"| {first}-{end - 1} | {reference[first]['target_speed']:.2f} | {shares} | "
                          f"{np.mean(inside) if inside else float('nan'):.1f} | "
-                         f"{np.mean(speed[several]) if speed[several] else float('nan'):.3f} | "
-                         f"{np.mean(speed[own]) if speed[own] else float('nan'):.3f} |")
+                         f"{f'{np.mean(speed[several]):.3f}' if speed[several] else '-'} | "
+                         f"{f'{np.mean(speed[own]):.3f}' if speed[own] else '-'} |")
         changes = {first for first, _ in stretches[1:]}
         at_change = sum(sequence[a]["gait"] != sequence[a - 1]["gait"] for sequence in mixed for a in changes)
         total = sum(switches([r["gait"] for r in sequence]) for sequence in mixed)
