@@ -20,6 +20,15 @@ library's trained run is also evaluated on it alone, starting from its trained s
 several gaits, its gait), ``profile.md`` (per stretch of one target: the gaits' shares and switches, the speeds with
 each library; where the switches fall; per seed, the gaits at the fastest target; the cost test) and
 ``gait_<task>_profile.png`` (the first seed's actions around the fastest target).
+
+With ``gait_boxes`` (a gait's own command box, ``experts.gait_boxes``: e.g. a ripple that walks only slowly) some
+targets of the profile need a gait: each ``profile.csv`` row names the gaits that reach its target (``needed``) and
+``profile.md`` tests "the planner picks the gait a target needs" (:func:`decide_needed_gait`); ``tag`` names the
+several-gait run directories (``<robot>_seed<seed>_<tag>``) so that such a library's runs sit beside the others:
+
+    python recipes/gaits/run.py robot=daisy own=tripod '~gaits' \
+        '+gaits={tripod: [[FL, MR, RL], [FR, ML, RR]], ripple: [[FL, MR], [ML, RR], [RL, FR]]}' \
+        'gait_boxes={ripple: {command_low: [-0.1, -0.1, -0.2], command_high: [0.1, 0.1, 0.2]}}' tag=speeds
 """
 
 import hierloco  # noqa: F401  (first: the rendering backend is chosen before anything loads MuJoCo)
