@@ -93,8 +93,10 @@ def seeds_of(cfg, method: str) -> list[int]:
 
 
 def seeds_text(cfg) -> str:
-    """The seeds of the study, in words: ``seeds [0, 1, 2]`` or ``seeds [0, 1, 2] (sac: [0])``."""
-    others = ", ".join(f"{m}: {seeds_of(cfg, m)}" for m in cfg.methods if m in cfg.method_seeds)
+    """The seeds of the study, in words: ``seeds [0, 1, 2]`` or ``seeds [0, 1, 2] (sac: [0])``, each method under
+    its name in the tables (``names``)."""
+    names = dict(cfg.get("names") or {})
+    others = ", ".join(f"{names.get(m, m)}: {seeds_of(cfg, m)}" for m in cfg.methods if m in cfg.method_seeds)
     return f"seeds {list(cfg.seeds)}" + (f" ({others})" if others else "")
 
 

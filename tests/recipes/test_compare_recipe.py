@@ -182,6 +182,9 @@ def test_method_seeds_give_a_method_its_own_seeds():
     runs = sorted((job.labels["method"], Path(job.run_dir).name) for job in planned)
     assert runs == [("lat", "a1_seed0"), ("lat", "a1_seed1"), ("lat", "a1_seed2"), ("sac", "a1_seed0")]
     assert run.seeds_text(cfg) == "seeds [0, 1, 2] (sac: [0])"
+    # under its name in the tables: the 2 x 256 SAC-SAC is shown as sac_sac_2x256 (names)
+    cfg = compare_config("methods=[lat,sac_sac]", "robots=[a1]", "seeds=[0,1,2,3,4]", "+method_seeds.sac_sac=[0,1,2]")
+    assert run.seeds_text(cfg) == "seeds [0, 1, 2, 3, 4] (sac_sac_2x256: [0, 1, 2])"
 
 
 @pytest.mark.parametrize("method_seeds, message", [
