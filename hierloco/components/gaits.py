@@ -62,9 +62,12 @@ def check_gait_boxes(robot: str | RobotSpec, gaits: Mapping[str, GaitGroups],
                      gait_boxes: Mapping[str, Mapping[str, Sequence[float]]] | None) -> list[str]:
     """A problem line per entry of ``gait_boxes`` (gait name -> ``{command_low: [vx, vy, yaw_rate], command_high:
     [...]}``, either bound optional) that names no gait of ``gaits``, has other keys, or is not a command box of the
-    robot (:func:`hierloco.components.expert_library.command_box`); empty when every box is valid."""
+    robot (:func:`hierloco.components.expert_library.command_box`), or one line when ``gait_boxes`` is not a
+    mapping at all; empty when every box is valid (or ``gait_boxes`` is None)."""
     from hierloco.components.expert_library import command_box
 
+    if gait_boxes is not None and not isinstance(gait_boxes, Mapping):
+        return [f"gait_boxes must map gait names to {{command_low: [...], command_high: [...]}}, got {gait_boxes!r}"]
     robot = get_robot(robot)
     problems = []
     for name, box in (gait_boxes or {}).items():

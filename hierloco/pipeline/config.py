@@ -203,14 +203,11 @@ def check_experts(c: Checker, robot, *, library: bool = True) -> None:
         if boxes is not None:
             if not isinstance(gaits, DictConfig):
                 c.fail("experts.gait_boxes gives gaits of experts.gaits boxes of their own: set experts.gaits too")
-            elif not isinstance(boxes, DictConfig):
-                c.fail(f"experts.gait_boxes must map gait names to {{command_low: [...], command_high: [...]}}, got "
-                       f"{boxes!r}")
             elif robot is not None:
                 from hierloco.components.gaits import check_gait_boxes
 
-                for problem in check_gait_boxes(robot, OmegaConf.to_container(gaits, resolve=True),
-                                                OmegaConf.to_container(boxes, resolve=True)):
+                boxes = OmegaConf.to_container(boxes, resolve=True) if isinstance(boxes, DictConfig) else boxes
+                for problem in check_gait_boxes(robot, OmegaConf.to_container(gaits, resolve=True), boxes):
                     c.fail(f"experts.{problem}")
             if get(c.cfg, "experts.tune", False):
                 c.fail("experts.tune searches the robot's own gait's parameters: it does not combine with experts.gaits")

@@ -73,11 +73,8 @@ def check(cfg):
     if robots and cfg.get("gait_boxes") is not None:
         from hierloco.components.gaits import check_gait_boxes
 
-        if not OmegaConf.is_dict(cfg.gait_boxes):
-            problems.append(f"gait_boxes must map gait names to {{command_low: [...], command_high: [...]}}, got "
-                            f"{cfg.gait_boxes!r}")
-        else:
-            problems += check_gait_boxes(robots[0], gaits, boxes_of(cfg))
+        problems += check_gait_boxes(robots[0], gaits, boxes_of(cfg) if OmegaConf.is_dict(cfg.gait_boxes)
+                                     else cfg.gait_boxes)
     tag = cfg.get("tag")
     if tag is not None and not (isinstance(tag, str) and tag.replace("_", "").isalnum() and tag.isascii()):
         problems.append(f"tag must be letters, digits and underscores (it names the run directories), got {tag!r}")
@@ -335,18 +332,30 @@ def needed_at(top: dict[str, float], speed: float) -> str:
     return "|".join(sorted(name for name, fastest in top.items() if fastest >= speed - 1e-9))
 
 
-def needed_gait_shares(found: list[dict], several: str) -> dict[int, tuple[float, float]]:
-    """Per seed, from profile rows with a ``needed`` column (:func:`profile_rows` with ``gait_boxes``): the share of
-    the several-gait runs' actions at the targets only some gaits reach that walk one of those gaits, and the share
-    of the actions in the same gaits at the targets every gait reaches. Empty when no target needs a gait."""
+def split_needed(found: list[dict], several: str) -> tuple[list[dict], list[dict]]:
+    """The several-gait runs' profile rows with a ``needed`` column (:func:`profile_rows` with ``gait_boxes``), split
+    into those at targets only some gaits reach and those at targets every gait reaches."""
     mine = [r for r in found if r["method"] == several and r.get("needed")]
     every = max((set(r["needed"].split("|")) for r in mine), key=len, default=set())
     needing = [r for r in mine if set(r["needed"].split("|")) < every]
+    return needing, [r for r in mine if set(r["needed"].split("|")) == every]
+
+
+def targets_needing(found: list[dict], several: str) -> list[tuple[float, str]]:
+    """``(target speed, the gaits that reach it)`` of each target only some gaits reach, by speed."""
+    return sorted({(r["target_speed"], r["needed"]) for r in split_needed(found, several)[0]})
+
+
+def needed_gait_shares(found: list[dict], several: str) -> dict[int, tuple[float, float]]:
+    """Per seed (:func:`split_needed`): the share of the several-gait runs' actions at the targets only some gaits
+    reach that walk one of those gaits, and the share of the actions in the same gaits at the targets every gait
+    reaches. Empty when no target needs a gait."""
+    needing, anywhere = split_needed(found, several)
     wanted = set().union(*(set(r["needed"].split("|")) for r in needing))
     shares = {}
     for seed in sorted({int(r["seed"]) for r in needing}):
         fast = [r["gait"] in r["needed"].split("|") for r in needing if int(r["seed"]) == seed]
-        slow = [r["gait"] in wanted for r in mine if int(r["seed"]) == seed and set(r["needed"].split("|")) == every]
+        slow = [r["gait"] in wanted for r in anywhere if int(r["seed"]) == seed]
         shares[seed] = (float(np.mean(fast)), float(np.mean(slow)) if slow else float("nan"))
     return shares
 
@@ -369,8 +378,7 @@ def needed_gait_markdown(found: list[dict], several: str, top: dict[str, float])
     shares = needed_gait_shares(found, several)
     if not shares:
         return []
-    needing = sorted({(r["target_speed"], r["needed"]) for r in found if r["method"] == several and r.get("needed")
-                      and len(r["needed"].split("|")) < len(top)})
+    needing = targets_needing(found, several)
     lines = ["## The gait the task needs", "",
              "Each gait's fastest command (its box's corner farthest from standing): "
              + ", ".join(f"{name} {speed:.2f} m/s" for name, speed in sorted(top.items())) + ". Targets only some "

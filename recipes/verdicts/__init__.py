@@ -417,7 +417,7 @@ def gait_checks(rows: list[dict]) -> list[Check]:
     gaits each target needs (``recipes/gaits``, ``gait_boxes``): per seed, the share of actions in the needed gaits
     where only they reach the target against their share where any gait will do, higher by at least
     ``NEEDED_GAIT_EFFECT`` (paired by seed; :func:`recipes.gaits.run.decide_needed_gait`)."""
-    from recipes.gaits.run import NEEDED_GAIT_EFFECT, needed_gait_shares
+    from recipes.gaits.run import NEEDED_GAIT_EFFECT, needed_gait_shares, targets_needing
 
     checks = []
     for robot in sorted({r["robot"] for r in rows}):
@@ -428,9 +428,8 @@ def gait_checks(rows: list[dict]) -> list[Check]:
             continue
         fast = np.array([shares[seed][0] for seed in sorted(shares)])
         slow = np.array([shares[seed][1] for seed in sorted(shares)])
-        needed = sorted({(r["target_speed"], r["needed"]) for r in mine if r["method"] == several and r["needed"]
-                         and len(r["needed"].split("|")) < max(len(x["needed"].split("|")) for x in mine)})
-        targets = ", ".join(f"{float(speed):.2f} m/s: {gaits.replace('|', ', ')}" for speed, gaits in needed)
+        targets = ", ".join(f"{float(speed):.2f} m/s: {gaits.replace('|', ', ')}"
+                            for speed, gaits in targets_needing(mine, several))
         ours = (f"the needed gaits' share {100 * fast.mean():.0f} +- {100 * fast.std():.0f} % where only they reach "
                 f"the target ({targets}), {100 * slow.mean():.0f} +- {100 * slow.std():.0f} % where any gait will "
                 f"do (n={len(shares)}; {several})")
