@@ -5,8 +5,9 @@ import math
 
 import numpy as np
 import pytest
+import scipy.stats
 
-from hierloco.stats import (DOES_NOT_HOLD, HOLDS, INCONCLUSIVE, NOT_TESTABLE, betainc, bootstrap_interval, decide_all,
+from hierloco.stats import (DOES_NOT_HOLD, HOLDS, INCONCLUSIVE, NOT_TESTABLE, bootstrap_interval, decide_all,
                             decide_better, decide_close, power, seeds_needed, t_cdf, t_ppf, t_two_sided_p, welch,
                             welch_t_test)
 
@@ -44,13 +45,19 @@ def test_t_ppf_inverts_the_cdf():
         t_ppf(1.0, 3)
 
 
-def test_betainc_closed_forms():
-    for x in (0.0, 0.1, 0.5, 0.93, 1.0):
-        assert betainc(1.0, 1.0, x) == pytest.approx(x, abs=1e-14)
-        assert betainc(3.0, 1.0, x) == pytest.approx(x ** 3, abs=1e-14)
-        assert betainc(1.0, 2.5, x) == pytest.approx(1 - (1 - x) ** 2.5, abs=1e-14)
-    with pytest.raises(ValueError, match="a, b > 0"):
-        betainc(0.0, 1.0, 0.5)
+def test_t_cdf_closed_forms_for_three_four_and_infinite_degrees_of_freedom():
+    for t in (-7.5, -1.0, -0.2, 0.3, 1.0, 4.0, 30.0):
+        u = t / math.sqrt(3)
+        assert t_cdf(t, 3) == pytest.approx(0.5 + (math.atan(u) + u / (1 + u * u)) / math.pi, abs=1e-12)
+        s = 1 + t * t / 4
+        assert t_cdf(t, 4) == pytest.approx(0.5 + 0.375 * t / math.sqrt(s) * (1 - t * t / (12 * s)), abs=1e-12)
+        assert t_cdf(t, math.inf) == pytest.approx(0.5 * math.erfc(-t / math.sqrt(2)), abs=1e-12)   # the normal
+    assert t_ppf(0.975, math.inf) == pytest.approx(1.959964, abs=1e-6)
+    for bad in (0.0, -2.0):
+        with pytest.raises(ValueError, match="df > 0"):
+            t_cdf(1.0, bad)
+        with pytest.raises(ValueError, match="df > 0"):
+            t_ppf(0.9, bad)
 
 
 def test_welch_statistic_degrees_of_freedom_and_p():
@@ -59,6 +66,9 @@ def test_welch_statistic_degrees_of_freedom_and_p():
     assert t == pytest.approx(-2.5 / math.sqrt(25 / 12), abs=1e-12)
     assert df == pytest.approx((25 / 12) ** 2 / ((5 / 12) ** 2 / 3 + (20 / 12) ** 2 / 3), abs=1e-12)
     assert p == pytest.approx(t_two_sided_p(t, df)) and 0.1 < p < 0.2
+    reference = scipy.stats.ttest_ind([1.0, 2.0, 3.0, 4.0], [2.0, 4.0, 6.0, 8.0], equal_var=False)
+    assert (t, df, p) == (pytest.approx(reference.statistic, abs=1e-12), pytest.approx(reference.df, abs=1e-12),
+                          pytest.approx(reference.pvalue, abs=1e-12))
     paired = welch([0.3, 0.5, 0.4], [0.2, 0.3, 0.3], paired=True)   # differences 0.1, 0.2, 0.1
     assert (paired.estimate, paired.df) == (pytest.approx(0.4 / 3), 2.0)
     assert paired.se == pytest.approx(np.std([0.1, 0.2, 0.1], ddof=1) / math.sqrt(3))

@@ -365,7 +365,7 @@ def train_com_model(
     duration: float = 1.0,
     seed: int = 0,
     device: str = "cpu",
-    progress: bool = True,
+    progress: bool = False,
     **model_options,
 ) -> TrainedCoMModel:
     """Fits a CoM dynamics model (by registry name, :data:`MODELS`) to M world-frame transitions

@@ -116,7 +116,7 @@ class TransitionData:
 
 
 def collect_transitions(env: LatentActionEnv, num_transitions: int, *, episode_length: int = 20, seed: int = 0,
-                        progress: bool = True) -> TransitionData:
+                        progress: bool = False) -> TransitionData:
     """Collects ``num_transitions`` valid transitions on ``env`` with uniformly random actions.
 
     ``metadata`` records the low level, the seed, how many transitions were dropped for falls or blow-ups, and how

@@ -179,7 +179,7 @@ def build_expert_library(
     command_high: Sequence[float] | None = None,
     max_rounds: int = 5,
     max_failed_experts: int | None = None,
-    progress: bool = True,
+    progress: bool = False,
 ) -> ExpertLibrary:
     """Builds a library of ``num_experts`` gaits (see the module docstring).
 

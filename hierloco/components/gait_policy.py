@@ -169,7 +169,7 @@ def train_gait_policy(
     latent_weight_decay: float = 1e-4,
     seed: int = 0,
     device: str = "cpu",
-    progress: bool = True,
+    progress: bool = False,
 ) -> TrainedGaitPolicy:
     """Fits ``pi`` and one latent per expert to ``G x N x J`` expert joint targets (rad).
 

@@ -269,7 +269,7 @@ def train_sac(env: EnvBase, agent: SACAgent, *, total_frames: int, init_random_f
               log_every: int = 1000, diagnostics: Callable[[TensorDictBase], Mapping[str, float]] | None = None,
               checkpoint_path: str | os.PathLike | None = None, checkpoint_every: int = 10_000,
               settings: Mapping | None = None, torch_threads_during: int | None = 1, seed: int = 0,
-              progress: bool = True, logger=None, tag: str = "sac") -> dict:
+              progress: bool = False, logger=None, tag: str = "sac") -> dict:
     """Off-policy SAC on a batched env: collect one env step (``B`` frames), store it, update, repeat.
 
     ``B`` is the env's batch size (robots stepped together: :class:`hierloco.envs.latent_env.LatentActionEnv`

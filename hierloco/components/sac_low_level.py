@@ -98,7 +98,7 @@ def train_sac_low_level(
     nthread: int | None = None,
     seed: int = 0,
     device="cpu",
-    progress: bool = True,
+    progress: bool = False,
     logger=None,
 ) -> TrainedSACLowLevel:
     """Trains a SAC policy to track velocity commands on ``num_robots`` robots at once (:func:`train_sac` on
@@ -126,8 +126,8 @@ def train_sac_low_level(
         torch_threads_during: torch threads while training (:func:`torch_threads`).
         nthread: simulation threads. seed: networks, commands, reset noise and exploration.
         device: where the agent, its updates and the replay buffer live (the simulation runs on the CPU).
-        progress: show a progress bar. logger: anything with ``log_metrics(dict, step=)``
-            (:class:`hierloco.loggers.RunLogger`); metrics are ``train/sac_low_level/...``.
+        progress: show a progress bar (off by default; the recipes turn it on). logger: anything with
+            ``log_metrics(dict, step=)`` (:class:`hierloco.loggers.RunLogger`); metrics are ``train/sac_low_level/...``.
 
     Returns:
         The trained low level; ``metadata`` holds the settings, ``frames``, ``updates``, ``train_seconds`` and the
