@@ -5,11 +5,12 @@ on this machine.
     ./run.sh bench --robots a1 --num-robots 32 --repeats 3
     ./run.sh bench --check                          # exit 1 when a target ratio is missed
 
-Simulation: batched simulator vs native mujoco.rollout vs a naive TorchRL loop. Planning: one MPC call vs the bare
-model forward pass. The IK baseline's low level vs LAT's (dynamics data and an evaluation-sized closed loop). SAC:
-one SAC update vs a plain update of the same networks (bench_sac.py, more options there). Studies: a study through
-Ray vs the same jobs one by one (bench_study.py, run on its own: it takes minutes). LAT end to end at paper scale is
-timed by the recipe itself (report.json, stage_seconds).
+Simulation: batched simulator vs native mujoco.rollout vs a naive TorchRL loop, and on rough ground vs flat ground
+(bench_terrain.py). Planning: one MPC call vs the bare model forward pass. The IK baseline's low level vs LAT's
+(dynamics data and an evaluation-sized closed loop). SAC: one SAC update vs a plain update of the same networks
+(bench_sac.py, more options there). Studies: a study through Ray vs the same jobs one by one (bench_study.py, run on
+its own: it takes minutes). LAT end to end at paper scale is timed by the recipe itself (report.json,
+stage_seconds).
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ import bench_planner
 import bench_sac
 import bench_sim
 import bench_study
+import bench_terrain
 from bench_cli import check_robot_names, positive_int as _positive_int
 
 
@@ -70,6 +72,10 @@ def main(argv=None) -> int:
                                               repeats=args.repeats, torchrl_steps=args.torchrl_steps,
                                               nthread=args.nthread))
     report("Simulation", bench_sim.format_table(rows, args.nthread))
+    print("\nbenchmarking the batched simulator on rough ground ...", flush=True)
+    terrain_rows = [bench_terrain.benchmark_robot(name, args.num_robots, args.control_steps, args.repeats, args.nthread)
+                    for name in args.robots]
+    report("Terrain", bench_terrain.format_table(terrain_rows, args.nthread))
     print("\nbenchmarking one MPC call ...", flush=True)
     planner_rows = [bench_planner.benchmark_planner(robots=1), bench_planner.benchmark_planner(robots=8)]
     report("Planning", bench_planner.format_table(planner_rows))
@@ -91,7 +97,8 @@ def main(argv=None) -> int:
         write_text(args.out, f"# `./run.sh bench`\n\n{machine} (at the start); load at the end "
                              f"{', '.join(f'{x:.1f}' for x in os.getloadavg())}\n\n" + "\n".join(sections))
         print(f"\ntables written to {args.out}")
-    if args.check and (not bench_sim.targets_met(rows) or any(r.ratio > 2.0 for r in planner_rows)
+    if args.check and (not bench_sim.targets_met(rows) or not bench_terrain.targets_met(terrain_rows)
+                       or any(r.ratio > 2.0 for r in planner_rows)
                        or not bench_ik.targets_met(ik_rows) or any(r.ratio > bench_sac.TARGET_RATIO for r in sac_rows)
                        or not study_ok):
         return 1

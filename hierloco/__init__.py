@@ -13,12 +13,12 @@ render_backend.choose()
 __version__ = "0.1.0"
 
 
-def load_run(run_dir, device: str = "cpu"):
-    """The trained parts of a recipe's run directory, their networks on ``device``: see
-    :func:`hierloco.trained.load_run`."""
+def load_run(run_dir, device: str = "cpu", *, trust_imports=()):
+    """The trained parts of a recipe's run directory, their networks on ``device`` (``trust_imports``: the import
+    paths its files may name): see :func:`hierloco.trained.load_run`."""
     from hierloco.trained import load_run as _load_run
 
-    return _load_run(run_dir, device=device)
+    return _load_run(run_dir, device=device, trust_imports=trust_imports)
 
 
 def export(run_dir, out_dir, **options):

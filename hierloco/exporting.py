@@ -70,7 +70,7 @@ from hierloco.components.com_model import CoMDynamicsModel, TrainedCoMModel, mod
 from hierloco.components.gait_policy import LatentGaitPolicy, TrainedGaitPolicy
 from hierloco.envs.robots import CONTROL_TIMESTEP, get_robot
 from hierloco.envs.tasks import GoalReaching, Task, VelocityTracking, W_POSITION, W_YAW
-from hierloco.io import ArtifactError, atomic_path, load_arrays, write_text
+from hierloco.io import ArtifactError, atomic_path, load_arrays, load_yaml, write_text
 
 MANIFEST_FORMAT = 1
 DEFAULT_OPSET = 18
@@ -178,12 +178,10 @@ def _read_run_config(run_dir: Path) -> dict:
     path = run_dir / "config.yaml"
     if not path.exists():
         return {}
-    import yaml
-
     try:
-        config = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as error:
-        raise ArtifactError(f"corrupted run config {path}: {error}") from error
+        config = load_yaml(path)  # a received file: read safely (no YAML bomb), errors in one bounded line
+    except ArtifactError as error:
+        raise ArtifactError(f"corrupted run config: {error}") from None
     return config if isinstance(config, dict) else {}
 
 

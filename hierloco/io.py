@@ -4,7 +4,9 @@ Every artifact is written to a temporary file and moved into place in one step, 
 half-written file under a final name. Temporary files are named ``.hierloco-tmp-*``; they are made beside their
 destination, or, inside :func:`temporaries_in` (a run directory), at that directory's top level, where the next
 run of that directory removes what a killed run left (and nothing else). Array files are ``.npz`` archives that carry their
-metadata (a JSON dict) with them; a file that cannot be read gets an error that names it.
+metadata (a JSON dict) with them; a file that cannot be read gets an error that names it. A relative path read from a
+file that may come from someone else (a run directory's ``outputs.json``, ``run.json``, a stage key, a record) is
+turned into a path only by :func:`inside`, which refuses one that would reach outside its directory.
 
 Example:
     >>> import numpy as np, tempfile, os
@@ -20,11 +22,12 @@ from __future__ import annotations
 import io
 import json
 import os
+import stat
 import tempfile
 import zipfile
 from contextlib import contextmanager
 from contextvars import ContextVar
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 from typing import Any, Iterator, Mapping
 
 import numpy as np
@@ -40,6 +43,47 @@ _TEMPORARIES: ContextVar[Path | None] = ContextVar("hierloco_temporaries", defau
 
 class ArtifactError(ValueError):
     """An artifact on disk is missing, corrupted or does not match what was asked for."""
+
+
+class UnsafePathError(ArtifactError):
+    """A path read from a file (``outputs.json``, ``run.json``, a stage key, a record) that would lead outside the
+    directory it belongs to."""
+
+
+def inside(root: str | os.PathLike, relative: Any, *, source: str | os.PathLike | None = None) -> Path:
+    """``root / relative`` for a relative path read from a file that may have been received from someone else (run
+    directories and records travel between machines), refused with :class:`UnsafePathError` when it is not a
+    non-empty relative path, climbs out of ``root`` (``..``), or passes through a symbolic link below ``root``:
+    hierloco makes no links, so one there was put by someone else and may lead anywhere. ``root`` itself may be a
+    link (the user's own choice). Parts that do not exist yet are fine: they are new, made by the caller. ``source``
+    (the file the path was read from) is named in the message.
+
+    Example:
+        >>> import tempfile
+        >>> root = tempfile.mkdtemp()
+        >>> inside(root, "figures/a.png").relative_to(root).as_posix()
+        'figures/a.png'
+        >>> inside(root, "../thesis.tex")  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        hierloco.io.UnsafePathError: '../thesis.tex' is not a path inside ...
+    """
+    where = f" (read from {source})" if source is not None else ""
+    text = os.fspath(relative) if isinstance(relative, (str, os.PathLike)) else None
+    parts = PurePosixPath(text).parts if isinstance(text, str) and "\x00" not in text else ()
+    if not parts or parts[0] == "/" or ".." in parts:
+        raise UnsafePathError(f"{relative!r}{where} is not a path inside {root}: only a relative path without '..' "
+                              "is")
+    current = Path(root)
+    for part in parts:
+        current = current / part
+        try:
+            mode = os.lstat(current).st_mode
+        except (FileNotFoundError, NotADirectoryError):
+            break  # new from here on
+        if stat.S_ISLNK(mode):
+            raise UnsafePathError(f"{relative!r}{where} passes through the symbolic link {current}: hierloco reads "
+                                  f"and writes only inside {root}, never through a link")
+    return Path(root, *parts)
 
 
 @contextmanager
@@ -175,3 +219,121 @@ def load_json(path: str | os.PathLike, schema: Mapping[str, Any] | None = None) 
     if schema is not None:
         check_schema(obj, schema, f"corrupted artifact {path}")
     return obj
+
+
+# ---------------------------------------------------------------------------------------------------- YAML
+YAML_MAX_BYTES = 1 << 20  # the largest YAML file hierloco reads (a robot description or a run's config: a few kB)
+YAML_MAX_VALUES = 100_000  # the most values (scalars, lists, mappings) a YAML file may hold once aliases are expanded
+
+
+def brief(value: Any, limit: int = 80) -> str:
+    """``repr(value)`` cut to at most ``limit`` characters, in bounded time whatever ``value`` holds (a list of a
+    billion items, nested a thousand deep): what an error message shows of a value read from a file.
+
+        >>> brief([[1.5] * 1000] * 1000, limit=40)
+        '[[1.5, 1.5, 1.5, 1.5, 1.5, 1.5, ...],...'
+        >>> brief("kp")
+        "'kp'"
+    """
+    import reprlib
+
+    shorter = reprlib.Repr()
+    shorter.maxlevel = 3
+    shorter.maxlist = shorter.maxtuple = shorter.maxdict = shorter.maxset = shorter.maxfrozenset = 6
+    shorter.maxdeque = shorter.maxarray = 6
+    shorter.maxstring = shorter.maxother = shorter.maxlong = limit
+    text = shorter.repr(value)
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
+def _yaml_children(node) -> list:
+    import yaml
+
+    if isinstance(node, yaml.SequenceNode):
+        return list(node.value)
+    if isinstance(node, yaml.MappingNode):
+        return [part for pair in node.value for part in pair]
+    return []
+
+
+def _check_yaml_size(root, where: str, max_values: int) -> None:
+    """Refuses a composed YAML document that refers to itself through an alias, or whose aliases expand to more
+    than ``max_values`` values (a "billion laughs": a few lines that nest aliases nine deep hold 9**9 values).
+    Linear in the document's size: each node's expanded size is counted once."""
+    sizes: dict[int, int] = {}  # id(node) -> values it holds once expanded
+    open_nodes: set[int] = set()  # the nodes being counted: the ancestors of the current one
+    stack = [(root, False)]
+    while stack:
+        node, counted = stack.pop()
+        if counted:
+            open_nodes.discard(id(node))
+            sizes[id(node)] = size = 1 + sum(sizes[id(child)] for child in _yaml_children(node))
+            if size > max_values:
+                raise ArtifactError(f"{where}: its aliases (*name) expand to more than {max_values} values: hierloco "
+                                    "reads no YAML that large (expand them yourself if they are meant)")
+            continue
+        if id(node) in sizes:
+            continue
+        if id(node) in open_nodes:
+            raise ArtifactError(f"{where}: an alias (*name) refers to the value that holds it; a value cannot "
+                                "contain itself")
+        open_nodes.add(id(node))
+        stack.append((node, True))
+        stack += [(child, False) for child in _yaml_children(node) if id(child) not in sizes]
+
+
+def parse_yaml(text: str, where: str = "YAML", *, max_values: int = YAML_MAX_VALUES) -> Any:
+    """The value of the YAML document ``text`` (safe loading: plain values only, no Python objects), refused with
+    :class:`ArtifactError` naming ``where`` when it is not YAML, refers to itself, or expands to more than
+    ``max_values`` values through its aliases; the message never holds more than a bounded part of the text."""
+    import yaml
+
+    loader = yaml.SafeLoader(text)
+    try:
+        node = loader.get_single_node()
+        if node is None:
+            return None
+        _check_yaml_size(node, where, max_values)
+        return loader.construct_document(node)
+    except yaml.YAMLError as error:
+        message = " ".join(str(error).split())
+        raise ArtifactError(f"{where}: not a valid YAML file: {message[:300]}") from None
+    except RecursionError:
+        raise ArtifactError(f"{where}: its values are nested too deeply to read") from None
+    finally:
+        loader.dispose()
+
+
+def load_yaml(path: str | os.PathLike, *, max_bytes: int = YAML_MAX_BYTES, max_values: int = YAML_MAX_VALUES) -> Any:
+    """The value of the YAML file ``path``, read safely whoever wrote it (a robot description, a received run's
+    ``config.yaml``, a ``causes.yaml``): :class:`ArtifactError` naming the file when it is missing, not a regular
+    file, larger than ``max_bytes``, not UTF-8 text, not YAML, or when its aliases expand to more than
+    ``max_values`` values (:func:`parse_yaml`). Nothing it raises formats more than a bounded part of the file.
+
+        >>> import tempfile
+        >>> path = os.path.join(tempfile.mkdtemp(), "robot.yaml")
+        >>> _ = Path(path).write_text("kp: &k [1, 2]\\nkd: *k\\n")
+        >>> load_yaml(path)
+        {'kp': [1, 2], 'kd': [1, 2]}
+    """
+    path = Path(path)
+    try:
+        status = path.stat()
+    except FileNotFoundError:
+        raise ArtifactError(f"no such file: {path}") from None
+    except OSError as error:
+        raise ArtifactError(f"{path} cannot be read ({error.strerror or error})") from None
+    if not stat.S_ISREG(status.st_mode):
+        raise ArtifactError(f"{path} is not a regular file")
+    try:
+        with open(path, "rb") as file:
+            data = file.read(max_bytes + 1)
+    except OSError as error:
+        raise ArtifactError(f"{path} cannot be read ({error.strerror or error})") from None
+    if len(data) > max_bytes:
+        raise ArtifactError(f"{path} is larger than {max_bytes} bytes: too large for a YAML file hierloco reads")
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as error:
+        raise ArtifactError(f"{path} is not UTF-8 text (byte {error.start})") from None
+    return parse_yaml(text, str(path), max_values=max_values)

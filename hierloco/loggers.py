@@ -44,7 +44,7 @@ import socket
 import sys
 import threading
 from pathlib import Path
-from typing import Any, Iterable, Mapping, Sequence
+from typing import Any, Callable, Iterable, Mapping, Sequence
 from urllib.parse import urlparse
 
 import numpy as np
@@ -245,20 +245,27 @@ class RunLogger:
         self.wandb_problem: str | None = None
         self._closed = False
         self.loggers: dict[str, Any] = {"csv": CSVLogger(self.exp_name, log_dir=str(self.log_dir))}
-        if "tensorboard" in wanted:
-            from torchrl.record.loggers.tensorboard import TensorboardLogger
+        try:
+            if "tensorboard" in wanted:
+                from torchrl.record.loggers.tensorboard import TensorboardLogger
 
-            self.loggers["tensorboard"] = TensorboardLogger("tensorboard", log_dir=str(self.experiment_dir))
-        if "wandb" in wanted:
-            wandb_logger = self._open_wandb(project=project, group=group, tags=list(tags), mode=wandb_mode,
-                                            init_timeout=float(wandb_init_timeout), config=dict(config or {}))
-            if wandb_logger is not None:
-                self.loggers["wandb"] = wandb_logger
-        if config:
-            flat = flatten_config(config)
-            for backend in ("csv", "tensorboard"):  # wandb got the config with its run
-                if backend in self.loggers:
-                    self.loggers[backend].log_hparams(flat)
+                self.loggers["tensorboard"] = TensorboardLogger("tensorboard", log_dir=str(self.experiment_dir))
+            if "wandb" in wanted:
+                wandb_logger = self._open_wandb(project=project, group=group, tags=list(tags), mode=wandb_mode,
+                                                init_timeout=float(wandb_init_timeout), config=dict(config or {}))
+                if wandb_logger is not None:
+                    self.loggers["wandb"] = wandb_logger
+            if config:
+                flat = flatten_config(config)
+                for backend in ("csv", "tensorboard"):  # wandb got the config with its run
+                    if backend in self.loggers:
+                        self.loggers[backend].log_hparams(flat)
+        except BaseException:  # e.g. a full disk: what was opened is closed (its files too), then the error goes on
+            try:
+                self.close()
+            except Exception:  # noqa: BLE001  (the first error is the one to report)
+                pass
+            raise
 
     # ------------------------------------------------------------------------------------------------ wandb
     def _open_wandb(self, *, project, group, tags, mode, init_timeout, config):
@@ -459,20 +466,33 @@ class RunLogger:
 
     # ------------------------------------------------------------------------------------------------ end
     def close(self) -> None:
-        """Flushes and closes every backend (finishes the wandb run); calling it again does nothing."""
+        """Flushes and closes every backend (finishes the wandb run); calling it again does nothing. Every backend
+        and file is closed even when one fails (a full disk: a CSV file's last lines cannot be written, yet the file
+        is closed, so nothing is left for TorchRL's ``CSVExperiment.__del__`` to fail on later); the first failure
+        is raised after all of them are closed."""
         if self._closed:
             return
         self._closed = True
+        failures: list[BaseException] = []
+
+        def attempt(action: Callable[[], Any]) -> None:
+            try:
+                action()
+            except Exception as error:  # noqa: BLE001  (raised below, once everything else is closed)
+                failures.append(error)
+
         for backend, logger in self.loggers.items():
-            logger.close()
+            attempt(logger.close)
             if backend == "csv":
                 for handle in logger.experiment.files.values():
-                    handle.close()
+                    attempt(handle.close)  # a failed flush still closes the file (io's close always does)
             if backend == "wandb":
                 import wandb
 
                 if wandb.run is None:  # no other run in this process: wait until wandb has written its files
-                    wandb.teardown()
+                    attempt(wandb.teardown)
+        if failures:
+            raise failures[0]
 
     def __enter__(self) -> "RunLogger":
         return self

@@ -8,6 +8,13 @@ the studies all read the registry, so a new part is known everywhere once its cl
 packages add parts through the entry-point group ``hierloco.<kind>s`` (e.g. ``hierloco.planners``); an entry point
 names the class, and its name must be the class's registered name.
 
+A part that is not installed can be named by its *import path* ``package.module:Class``, but only where the user
+names it: :meth:`Registry.import_path` imports it, checks that it is a class (of a given base) and registers it under
+that path. The config checks call it for what the user's command line and config name
+(:func:`hierloco.pipeline.config.check_import_paths`); looking a name up (``registry[name]``) never imports, so an
+import path read from a file received with a run directory (its ``run.json``, its ``config.yaml``, a checkpoint, a
+record) names code nobody vouched for and is refused (``docs/pipeline.md``, "Received run directories are data").
+
 .. code-block:: toml
 
     [project.entry-points."hierloco.planners"]
@@ -29,11 +36,17 @@ Example:
 
 from __future__ import annotations
 
+import importlib
 import importlib.metadata
 import inspect
 from typing import Any, Callable, Generic, Iterable, Mapping, TypeVar
 
 T = TypeVar("T")
+
+
+def is_import_path(name: Any) -> bool:
+    """Whether ``name`` is an import path (``package.module:Class``) rather than a registered name."""
+    return isinstance(name, str) and ":" in name
 
 
 class Registry(Generic[T]):
@@ -112,24 +125,44 @@ class Registry(Generic[T]):
         return iter(self.names())
 
     def __getitem__(self, name: str) -> T:
-        """The part registered as ``name``; ``package.module:Class`` imports a part that is not installed (its
-        module registers it, or it is registered here under its ``registry_name``, else under ``name``)."""
+        """The part registered as ``name`` (or imported by :meth:`import_path` under that import path). Never
+        imports anything: an import path nobody imported raises ``ValueError`` saying so."""
         self._load_entry_points()
-        if name not in self._entries and isinstance(name, str) and ":" in name:
-            return self._import(name)
-        if name not in self._entries:
-            raise ValueError(f"unknown {self.kind} {name!r} ({self.kind}s: {', '.join(self.names())})")
-        return self._entries[name]
+        if name in self._entries:
+            return self._entries[name]
+        if is_import_path(name):
+            raise ValueError(f"{self.kind} {name!r} is an import path that was not given on the command line or in "
+                             f"the config: hierloco imports code only where you name it yourself ({self.kind}s: "
+                             f"{', '.join(self.names())})")
+        raise ValueError(f"unknown {self.kind} {name!r} ({self.kind}s: {', '.join(self.names())})")
 
-    def _import(self, reference: str) -> T:
-        module, _, attribute = reference.partition(":")
-        try:
-            target = getattr(importlib.import_module(module), attribute)
-        except (ImportError, AttributeError) as error:
-            raise ValueError(f"{self.kind} {reference!r}: cannot import it ({type(error).__name__}: {error})") from None
-        name = getattr(target, "registry_name", None)
-        if name is None or self._entries.get(name) is not target:
-            self.register(reference)(target)
+    def import_path(self, reference: str, *, base: type | None = None) -> T:
+        """The part named by the import path ``package.module:Class``, imported now and registered under
+        ``reference`` (its module may register it under a name of its own too). Only for a path the user gave (their
+        command line, their config, their code), never for one read from a received file.
+
+        Raises ``ValueError`` in one line when it cannot be imported, or names something that is not a class (a
+        subclass of ``base``, when given), before anything is registered."""
+        self._load_entry_points()
+        if reference in self._entries:
+            target = self._entries[reference]
+        else:
+            module, _, attribute = reference.partition(":")
+            try:
+                target = getattr(importlib.import_module(module), attribute)
+            except Exception as error:  # noqa: BLE001  (the user's module: what it raised, in one line)
+                raise ValueError(f"{self.kind} {reference!r}: cannot import it ({type(error).__name__}: "
+                                 f"{' '.join(str(error).split())})") from None
+        if not inspect.isclass(target) or (base is not None and not issubclass(target, base)):
+            what = f"the class {_qualname(target)}" if inspect.isclass(target) else \
+                f"{'a function' if callable(target) else 'a ' + type(target).__name__} ({_qualname(target)})"
+            wanted = f"a {base.__name__} subclass" if base is not None else "a class"
+            raise ValueError(f"{self.kind} {reference!r} is {what}, not {wanted}")
+        if reference not in self._entries:
+            if self._entries.get(getattr(target, "registry_name", None)) is target:
+                self._entries[reference] = target  # its module registered it: the path is another name of it
+            else:
+                self.register(reference)(target)
         return target
 
     def options(self, name: str) -> dict[str, Any]:
@@ -208,4 +241,4 @@ def without_defaults(values: Mapping[str, Any], defaults: Mapping[str, Any], kee
             if key in keep or key not in defaults or value != defaults[key]}
 
 
-__all__ = ["Registry", "without_defaults"]
+__all__ = ["Registry", "is_import_path", "without_defaults"]

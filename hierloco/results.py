@@ -8,7 +8,7 @@ Example:
     >>> rows = [dict(method="lat", robot="a1", setting="normal", task="goal_reaching", seed=0, episode=e,
     ...              normalized_cost=c, success=1.0, final_error=0.1) for e, c in enumerate([0.3, 0.5])]
     >>> print(markdown_table(rows).splitlines()[2])
-    | lat | a1 | normal | goal_reaching | 0.40 +- 0.10 | 100% | 0.10 +- 0.00 | 1 | - |
+    | lat | a1 | normal | goal_reaching | 0.40 +- 0.10 | 100% | 0.10 +- 0.00 | 1 | - | - |
 """
 
 from __future__ import annotations

@@ -11,6 +11,11 @@ Example:
 
 A run trained on any device loads on any other (checkpoints are read onto the CPU, then moved):
 ``load_run(path, device="cuda")`` gives parts whose networks and planning run on the GPU (``docs/gpu.md``).
+
+A run directory may come from someone else, so its files are data: every artifact is read from inside it
+(:func:`hierloco.io.inside`), and a part its ``run.json`` or checkpoints select is a registered name. An import path
+there (``low_level.kind: "pkg.module:Class"``) is imported only when the caller names it too:
+``load_run(path, trust_imports=["pkg.module:Class"])`` (``docs/pipeline.md``).
 """
 
 from __future__ import annotations
@@ -21,7 +26,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from hierloco.io import ArtifactError, check_schema
+from hierloco.io import ArtifactError, check_schema, inside
+from hierloco.registry import is_import_path
 
 MANIFEST = "run.json"
 
@@ -50,6 +56,24 @@ class TrainedRun:
     manifest: dict
     _cache: dict = field(default_factory=dict, repr=False)
     device: str = "cpu"
+    trust_imports: frozenset = frozenset()
+
+    def _part(self, registry, name, field: str, base: type):
+        """The class ``registry`` holds under ``name``, read from the run's ``field``: a registered name, or an import
+        path the caller trusts (:func:`load_run`'s ``trust_imports``); anything else is an :class:`ArtifactError`."""
+        if is_import_path(name) and name not in registry:
+            if name not in self.trust_imports:
+                raise ArtifactError(f"{self.path / MANIFEST}: {field} {name!r} is an import path read from the run's "
+                                    f"own files, which are never run as code; if you trust it, name it yourself: "
+                                    f"load_run(..., trust_imports=[{name!r}])")
+            try:
+                return registry.import_path(name, base=base)
+            except ValueError as error:
+                raise ArtifactError(f"{self.path / MANIFEST}: {field}: {error}") from None
+        try:
+            return registry[name]
+        except ValueError as error:
+            raise ArtifactError(f"{self.path / MANIFEST}: {error}") from None
 
     def _device(self, device) -> str:
         from hierloco.devices import resolve_device
@@ -73,7 +97,7 @@ class TrainedRun:
 
     def artifact(self, name: str) -> Path:
         """The path of the run's artifact ``name`` (e.g. ``gait_policy.pt``); raises when the run lacks it."""
-        path = self.path / name
+        path = inside(self.path, name)
         if not path.exists():
             raise ArtifactError(f"{self.path} has no {name}: the {self.method} run did not finish that stage")
         return path
@@ -82,23 +106,28 @@ class TrainedRun:
         """The trained low level (LAT and SAC: ``pi(., z)``; LIB: expert replay; IK: the expert controller for
         ``num_robots`` robots; SAC-SAC: the SAC velocity policy), rebuilt by its class in the low-level registry
         (:data:`hierloco.envs.low_level.LOW_LEVELS`) from the options the run recorded."""
-        from hierloco.envs.low_level import LOW_LEVELS
+        from hierloco.envs.low_level import LOW_LEVELS, LowLevel
 
         spec = self.manifest["low_level"]
-        try:
-            cls = LOW_LEVELS[spec["kind"]]
-        except ValueError as error:
-            raise ArtifactError(f"{self.path / MANIFEST}: {error}") from None
+        cls = self._part(LOW_LEVELS, spec["kind"], "low_level.kind", LowLevel)
         return cls.from_run(self, num_robots=num_robots, device=self._device(device), **spec.get("options", {}))
 
     def com_model(self, setting: str = "normal", device: str | None = None):
         """The trained :class:`~hierloco.components.com_model.TrainedCoMModel` of ``setting``, its model on
         ``device`` (default the run's)."""
-        from hierloco.components.com_model import TrainedCoMModel
+        from torch import nn
+
+        from hierloco.components.com_model import CHECKPOINT_FORMAT, CHECKPOINT_KIND, MODELS, TrainedCoMModel
+        from hierloco.io import load_checkpoint
 
         if setting not in self.settings:
             raise ValueError(f"{self.path} was trained for settings {self.settings}, not {setting!r}")
-        trained = TrainedCoMModel.load(self.artifact(f"dynamics_model_{setting}.pt"))
+        path = self.artifact(f"dynamics_model_{setting}.pt")
+        if self.trust_imports:  # the model class the checkpoint names, imported if the caller trusts it
+            name = load_checkpoint(path, CHECKPOINT_KIND, CHECKPOINT_FORMAT).get("model")
+            if is_import_path(name):
+                self._part(MODELS, name, f"{path.name}: model", nn.Module)
+        trained = TrainedCoMModel.load(path)
         trained.model.to(self._device(device))
         return trained
 
@@ -131,10 +160,15 @@ class TrainedRun:
             risk, beta: how a model with members scores a plan (``none``, ``mean_std`` with ``beta``,
                 ``pessimistic``); default the run's ``planner.risk`` and ``planner.beta``, else ``none``.
         """
-        from hierloco.components.planners import make_planner
+        from hierloco.components.planners import PLANNERS, BoxPlannerBase, make_planner
 
         device = self._device(device)
         options = {**self.manifest["planner"], **overrides}
+        name = options.get("name", "random_shooting")
+        if "name" in overrides and is_import_path(name):  # named by the caller's own code
+            PLANNERS.import_path(name, base=BoxPlannerBase)
+        elif "name" not in overrides:
+            self._part(PLANNERS, name, "planner.name", BoxPlannerBase)
         risk = options.pop("risk", "none") if risk is None else risk
         beta = options.pop("beta", 1.0) if beta is None else beta
         model = self.com_model(setting) if model is None else model
@@ -160,17 +194,23 @@ def fetch_wandb_run(reference: str) -> Path:
         raise ArtifactError(f"cannot fetch the wandb artifact {name}: {' '.join(str(error).split())[:200]}") from None
 
 
-def load_run(run_dir: str | os.PathLike, device: str = "cpu") -> TrainedRun:
+def load_run(run_dir: str | os.PathLike, device: str = "cpu", *, trust_imports=()) -> TrainedRun:
     """Opens the run directory of a finished (or partly finished) model-based recipe run (LAT, LIB, IK), or a run
     logged to wandb (``"wandb:<entity>/<project>/<run>-run:<version>"``: its checkpoints artifact). Its parts run on
-    ``device`` (``cpu``, ``cuda``, ``auto``: :func:`hierloco.devices.resolve_device`), whatever it was trained on."""
+    ``device`` (``cpu``, ``cuda``, ``auto``: :func:`hierloco.devices.resolve_device`), whatever it was trained on.
+
+    The run's files select its parts by registered name; ``trust_imports`` lists the import paths
+    (``"pkg.module:Class"``) they may name instead, which are then imported (a class of the right kind, or an
+    :class:`ArtifactError`). Any other import path in them is refused: a run directory may come from someone else."""
     from hierloco.devices import resolve_device
 
     device = resolve_device(device)  # a device that cannot be used here: ValueError, before any file is read
+    if isinstance(trust_imports, str) or not all(is_import_path(item) for item in trust_imports):
+        raise ValueError(f"trust_imports must list import paths ('pkg.module:Class'), got {trust_imports!r}")
     if isinstance(run_dir, str) and run_dir.startswith("wandb:"):
         run_dir = fetch_wandb_run(run_dir)
     path = Path(run_dir)
-    manifest_path = path / MANIFEST
+    manifest_path = inside(path, MANIFEST)
     if not manifest_path.exists():
         raise ArtifactError(f"{path} is not a hierloco run directory (no {MANIFEST}); run a recipe into it first")
     try:
@@ -179,4 +219,4 @@ def load_run(run_dir: str | os.PathLike, device: str = "cpu") -> TrainedRun:
         raise ArtifactError(f"corrupted run manifest {manifest_path}: {error}") from error
     check_schema(manifest, {"method": str, "robot": str, "seed": int, "settings": list, "planner": dict,
                             "low_level": {"kind": str}}, f"corrupted run manifest {manifest_path}")
-    return TrainedRun(path, manifest, device=device)
+    return TrainedRun(path, manifest, device=device, trust_imports=frozenset(trust_imports))

@@ -155,6 +155,7 @@ class CommandLowLevel(LowLevel):
         **controller_kwargs: the other :class:`RaibertController` options (gains, gait period, ...).
 
     Example:
+        >>> from hierloco.envs.batched_sim import BatchedSimulator
         >>> low = CommandLowLevel("a1", num_robots=2)
         >>> low.run(BatchedSimulator("a1", 2), np.array([[0.2, 0.0, 0.0], [0.0, 0.1, 0.2]])).joint_targets.shape
         (2, 100, 12)

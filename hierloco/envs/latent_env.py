@@ -9,6 +9,13 @@ during the action is terminated. With a robot whose ``com_noise`` is set (a pert
 :mod:`hierloco.envs.robots.hardware`) both are measured with that noise, as a state estimator would, and the true
 state is ``com_state_true``. Rewards come from a task (see :mod:`hierloco.envs.tasks`); without one they are 0.
 
+The env writes ``is_init`` (``B x 1`` bool, TorchRL's episode-start flag, as
+:class:`~torchrl.envs.transforms.InitTracker` writes it): true in the state a reset returns for the robots reset,
+false after a step. So a planner run on the bare env, by ``env.rollout`` or a TorchRL ``Collector``, knows when each
+robot's episode starts over without any transform (:mod:`hierloco.components.planners.base`), and a collector finds
+the flag it would otherwise append an ``InitTracker`` for. The batch is ``[B]`` for every ``B``, 1 included (the
+conventions of :mod:`hierloco.envs`).
+
 Example:
     >>> from torchrl.envs.utils import check_env_specs
     >>> from hierloco.components.expert_library import build_expert_library
@@ -19,6 +26,8 @@ Example:
 
 from __future__ import annotations
 
+import math
+import numbers
 from typing import Sequence
 
 import numpy as np
@@ -38,24 +47,30 @@ class LatentActionEnv(EnvBase):
     Args:
         low_level: turns actions into joint targets, a :class:`hierloco.envs.low_level.LowLevel` (the latent gait
             policy, expert replay and the Raibert controller are in :mod:`hierloco.components.low_level`).
-        num_robots: B, the env's batch size.
+        num_robots: B, the env's batch size (``[B]``, also for one robot).
         disabled_legs: legs locked at their standing angles (the paper's adverse setting).
         limp_legs: legs whose servos are off (another fault model, see :mod:`hierloco.envs.faults`).
         init_joint_noise: rad of uniform noise on the standing joint angles at reset.
         record: also return, per action, the ``N`` CoM states ``com_path`` (``B x N x 5``), foot contacts
-            ``foot_contacts`` (``B x N x L``) and generalised positions ``qpos`` (``B x N x nq``), for plots and
-            videos.
+            ``foot_contacts`` (``B x N x L`` bool, true in contact) and generalised positions ``qpos``
+            (``B x N x nq``, float64), for plots and videos.
         seed: seeds the reset noise.
         nthread: simulation threads.
         obstacles: static boxes in the world (a navigation arena).
         robot: the robot simulated, when it is not the low level's own: a copy of it with other physics (the same
             joints), e.g. :func:`hierloco.envs.robots.hardware.perturbed`.
+        terrain, pushes, randomization: the ground, pushes on the trunk and randomised dynamics, passed to the
+            batched simulator (:class:`hierloco.envs.batched_sim.BatchedSimulator`, ``docs/terrain.md``).
     """
 
     def __init__(self, low_level: LowLevel, num_robots: int = 1, *, disabled_legs: Sequence[str] = (),
                  init_joint_noise: float = 0.02, record: bool = False, seed: int | None = None,
                  nthread: int | None = None, obstacles: Sequence = (), device: str = "cpu",
-                 limp_legs: Sequence[str] = (), robot=None):
+                 limp_legs: Sequence[str] = (), robot=None, terrain=None, pushes=None, randomization=None):
+        whole = (isinstance(num_robots, numbers.Real) and not isinstance(num_robots, bool)
+                 and math.isfinite(num_robots) and float(num_robots).is_integer())
+        if not whole or num_robots < 1:
+            raise ValueError(f"num_robots must be a whole number >= 1, got {num_robots!r}")
         super().__init__(batch_size=torch.Size([int(num_robots)]), device=device)
         self.low_level = low_level
         self.robot = low_level.robot if robot is None else robot
@@ -67,11 +82,14 @@ class LatentActionEnv(EnvBase):
         self.record = record
         self.sim = BatchedSimulator(self.robot, int(num_robots), disabled_legs=disabled_legs,
                                     init_joint_noise=init_joint_noise, seed=seed, nthread=nthread,
-                                    obstacles=obstacles, limp_legs=limp_legs)
+                                    obstacles=obstacles, limp_legs=limp_legs, terrain=terrain, pushes=pushes,
+                                    randomization=randomization)
         self.steps_per_action = low_level.steps_per_action
         b = int(num_robots)
+        flag = Categorical(2, (b, 1), dtype=torch.bool, device=self.device)
         observation = {"com_state": Unbounded((b, 5), device=self.device),
-                       "com_velocity_local": Unbounded((b, 2), device=self.device)}
+                       "com_velocity_local": Unbounded((b, 2), device=self.device),
+                       "is_init": flag.clone()}
         if self.com_noise.any():
             observation["com_state_true"] = Unbounded((b, 5), device=self.device)
         if record:
@@ -87,7 +105,6 @@ class LatentActionEnv(EnvBase):
             high = torch.as_tensor(low_level.action_high, dtype=torch.float32, device=self.device)
             self.action_spec = Bounded(low.expand(b, -1), high.expand(b, -1), (b, len(low)), device=self.device)
         self.reward_spec = Unbounded((b, 1), device=self.device)
-        flag = Categorical(2, (b, 1), dtype=torch.bool, device=self.device)
         self.done_spec = Composite(done=flag, terminated=flag.clone(), truncated=flag.clone(), shape=(b,),
                                    device=self.device)
         self.failures = 0  # robots that fell or blew up, over the env's life
@@ -127,7 +144,9 @@ class LatentActionEnv(EnvBase):
         self.low_level.reset(mask)
         b = self.batch_size
         done = torch.zeros((*b, 1), dtype=torch.bool, device=self.device)
-        return TensorDict({**self._observation(), "done": done, "terminated": done.clone(),
+        started = (torch.ones_like(done) if mask is None
+                   else torch.as_tensor(mask, dtype=torch.bool, device=self.device).reshape(*b, 1))
+        return TensorDict({**self._observation(), "is_init": started, "done": done, "terminated": done.clone(),
                            "truncated": done.clone()}, batch_size=b, device=self.device)
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
@@ -137,7 +156,7 @@ class LatentActionEnv(EnvBase):
         self.failures += int(failed.sum())
         terminated = torch.as_tensor(failed, device=self.device)[:, None]
         b = self.batch_size
-        return TensorDict({**self._observation(result),
+        return TensorDict({**self._observation(result), "is_init": torch.zeros_like(terminated),
                            "reward": torch.zeros((*b, 1), device=self.device),
                            "done": terminated.clone(), "terminated": terminated,
                            "truncated": torch.zeros_like(terminated)}, batch_size=b, device=self.device)

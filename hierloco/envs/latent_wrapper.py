@@ -36,7 +36,7 @@ from __future__ import annotations
 from typing import Sequence
 
 import torch
-from tensordict import TensorDictBase
+from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Bounded
 from torchrl.envs import EnvBase
 from torchrl.envs.utils import step_mdp
@@ -55,9 +55,12 @@ class LatentActionWrapper(EnvBase):
         latent_key, phase_key: where the latent and the phase are written in the wrapped env's TensorDicts for the
             low level to read.
 
-    The action spec is the latent box (``B x Z``); observations, reward and done specs are the wrapped env's. A low
-    level whose network is on another device than the env (``run.low_level(device="cuda")``) runs there: the latent
-    and the phase go over and the joint targets come back at every control step.
+    The action spec is the latent box (``B x Z``); observations, reward and done specs are the wrapped env's. The
+    construction calls the low level once on the box's centre and refuses (``ValueError``) a low level that cannot
+    take a latent of the box's size or does not write the wrapped env's action in the shape of its action spec (a
+    low level of another robot). A low level whose network is on another device than the env
+    (``run.low_level(device="cuda")``) runs there: the latent and the phase go over and the joint targets come back
+    at every control step.
     """
 
     def __init__(self, env: EnvBase, low_level, *, steps_per_action: int | None = None,
@@ -90,6 +93,26 @@ class LatentActionWrapper(EnvBase):
         self.reward_spec = env.full_reward_spec.clone()
         self.done_spec = env.full_done_spec.clone()
         self._inner: TensorDictBase | None = None  # the wrapped env's current TensorDict
+        self._check_low_level(low, high)
+
+    def _check_low_level(self, low: torch.Tensor, high: torch.Tensor) -> None:
+        """At construction, one call of the low level on the latent box's centre: a ``ValueError`` unless it takes a
+        latent of the box's size and writes the wrapped env's action with the shape of its action spec."""
+        key = self.env.action_key
+        expected = tuple(self.env.full_action_spec[key].shape)
+        batch = tuple(self.env.batch_size)
+        probe = TensorDict({self.latent_key: ((low + high) / 2).expand(*batch, -1),
+                            self.phase_key: torch.full((*batch, 1), 1.0 / self.steps_per_action, device="cpu")},
+                           batch_size=batch).to(self.env.device or "cpu")
+        try:
+            with torch.no_grad():
+                targets = self._joint_targets(probe).get(key)
+        except (RuntimeError, ValueError, KeyError, IndexError, TypeError) as error:
+            raise ValueError(f"the low level fails on a latent of the box's size {len(low)} (latent box {low.tolist()} "
+                             f"to {high.tolist()}): {error}") from None
+        if tuple(targets.shape) != expected:
+            raise ValueError(f"the low level writes {key!r} of shape {tuple(targets.shape)}, the wrapped env's action "
+                             f"spec has shape {expected} (a low level of another robot?)")
 
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
         inner = self.env.reset(tensordict.select(*self.env.reset_keys, strict=False)

@@ -49,8 +49,8 @@ from hierloco.envs.robots import (
     get_robot,
     joint_qpos_indices,
     joint_qvel_indices,
-    standing_qpos,
 )
+from hierloco.envs.terrain import make_terrain, standing_qpos_on
 
 INIT_JOINT_NOISE = 0.05  # rad, uniform noise on the standing joint angles at reset
 FOOT_CONTACT_FORCE = 1.0  # N, a foot touching with more than this is in stance
@@ -135,17 +135,26 @@ class LocomotionPhysics(dm_mujoco.Physics):
     """A dm_control Physics for a legged robot, with named accessors in stated frames and units.
 
     ``unstable`` is true once the episode cannot go on: the physics blew up (NaN, MuJoCo instability warnings) or
-    the agent sent NaN joint targets.
+    the agent sent NaN joint targets. ``terrain`` is the ground (:mod:`hierloco.envs.terrain`; flat by default).
     """
 
     robot: RobotSpec
     unstable: bool = False
 
     @classmethod
-    def from_robot(cls, robot: str | RobotSpec, disabled_legs: Sequence[str] = ()) -> "LocomotionPhysics":
+    def from_robot(cls, robot: str | RobotSpec, disabled_legs: Sequence[str] = (), terrain=None
+                   ) -> "LocomotionPhysics":
         robot = get_robot(robot)
-        physics = cls.from_model(dm_wrapper.MjModel(compile_model(robot, disabled_legs)))
+        terrain = make_terrain(terrain)
+        physics = cls.from_model(dm_wrapper.MjModel(compile_model(robot, disabled_legs, terrain=terrain)))
         physics.robot = robot
+        physics.terrain = terrain
+        physics._standing_qpos = standing_qpos_on(terrain, physics.model.ptr, robot)
+        physics._ground_reach = 0.0
+        if not terrain.is_flat:
+            from hierloco.envs.navigation import footprint_radius
+
+            physics._ground_reach = footprint_radius(robot) / 2
         physics._qpos_idx = joint_qpos_indices(physics.model.ptr, robot)
         physics._qvel_idx = joint_qvel_indices(physics.model.ptr, robot)
         physics._foot_sites = [physics.model.ptr.site(leg.foot_site).id for leg in robot.legs]
@@ -205,9 +214,14 @@ class LocomotionPhysics(dm_mujoco.Physics):
         return self.data.sensordata[: len(self.robot.legs)] > FOOT_CONTACT_FORCE
 
     def has_fallen(self) -> bool:
-        """Roll or pitch beyond the robot's limits, or the base below its minimum height (:func:`robot_has_fallen`)."""
+        """Roll or pitch beyond the robot's limits, or the base below its minimum height (:func:`robot_has_fallen`)
+        above the lowest ground near it (:meth:`hierloco.envs.terrain.Terrain.ground_below`)."""
         roll, pitch, _ = self.roll_pitch_yaw()
-        return bool(robot_has_fallen(self.robot, roll, pitch, self.data.qpos[2]))
+        height = self.data.qpos[2]
+        if not self.terrain.is_flat:
+            height = height - float(self.terrain.ground_below(self.data.qpos[0], self.data.qpos[1],
+                                                              self._ground_reach))
+        return bool(robot_has_fallen(self.robot, roll, pitch, height))
 
 
 class LocomotionTask(base.Task):
@@ -226,7 +240,7 @@ class LocomotionTask(base.Task):
 
     def initialize_episode(self, physics: LocomotionPhysics) -> None:
         robot = physics.robot
-        qpos = standing_qpos(physics.model.ptr, robot)
+        qpos = physics._standing_qpos.copy()
         noise = reset_joint_noise(self.random, self.init_joint_noise, 1, robot.num_joints, physics._locked_joints)
         qpos[physics._qpos_idx] += noise[0]
         physics.data.qpos[:] = qpos
@@ -287,11 +301,13 @@ def make_dm_env(
     time_limit: float = 10.0,
     seed: int | None = None,
     init_joint_noise: float = INIT_JOINT_NOISE,
+    terrain=None,
 ) -> control.Environment:
-    """A dm_control ``Environment`` of ``robot`` at 100 Hz control; ``disabled_legs`` are locked standing."""
+    """A dm_control ``Environment`` of ``robot`` at 100 Hz control; ``disabled_legs`` are locked standing; the robot
+    starts on ``terrain`` (:func:`hierloco.envs.terrain.make_terrain`; default flat)."""
     if not time_limit > 0:
         raise ValueError(f"time_limit must be positive seconds, got {time_limit}")
     init_joint_noise = check_joint_noise(init_joint_noise)
-    physics = LocomotionPhysics.from_robot(robot, disabled_legs)
+    physics = LocomotionPhysics.from_robot(robot, disabled_legs, terrain=terrain)
     task = LocomotionTask(init_joint_noise=init_joint_noise, random=seed)
     return control.Environment(physics, task, time_limit=time_limit, control_timestep=CONTROL_TIMESTEP)

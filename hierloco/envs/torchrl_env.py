@@ -11,7 +11,8 @@ from __future__ import annotations
 
 from typing import Sequence
 
-from torchrl.envs import CatTensors, Compose, DoubleToFloat, TransformedEnv
+import torch
+from torchrl.envs import CatTensors, Compose, DoubleToFloat, DTypeCastTransform, TransformedEnv
 
 from hierloco.envs.locomotion import INIT_JOINT_NOISE, LocomotionEnv, make_dm_env
 from hierloco.envs.robots import RobotSpec, get_robot
@@ -30,6 +31,7 @@ def make_env(
     seed: int | None = None,
     init_joint_noise: float = INIT_JOINT_NOISE,
     device: str = "cpu",
+    terrain=None,
 ) -> TransformedEnv:
     """A TorchRL env of ``robot`` (a registered name or a :class:`RobotSpec`) at 100 Hz.
 
@@ -38,20 +40,25 @@ def make_env(
     ``observation`` (``9 + 2 J + L``: J joints, L legs) for policies that take one vector: the concatenation, in this
     order (:data:`OBSERVATION_KEYS`), of ``com_position`` (3, world, m), ``com_velocity`` (3, world, m/s),
     ``orientation`` (3, roll/pitch/yaw, rad), ``joint_positions`` (J, rad), ``joint_velocities`` (J, rad/s) and
-    ``foot_contacts`` (L, 1 in contact, 0 not), each also kept under its own key. ``disabled_legs`` adds a
+    ``foot_contacts`` (L, 1 in contact, 0 not), each also kept under its own key (``foot_contacts`` there as bool,
+    true in contact: the conventions of :mod:`hierloco.envs`). ``disabled_legs`` adds a
     :class:`DisableLegs` transform. A fall sets ``terminated``, the time limit (s) ``truncated``; the base env is a
     :class:`hierloco.envs.locomotion.LocomotionEnv` (``env.base_env.physics`` is the dm_control Physics).
 
     Joint targets outside the joint range are clamped to it, as in the batched simulator. A NaN target ends the step
     as terminated with reward 0 (the previous targets are held for that step) and warns; an infinite target raises
     ``ValueError`` (the batched simulator refuses both).
+
+    ``terrain`` is the ground (a name, a mapping with a name, a file or a :class:`hierloco.envs.terrain.Terrain`;
+    default flat, ``docs/terrain.md``): the robot starts standing on it and falls relative to it.
     """
     robot = get_robot(robot)
     robot.leg_joint_indices(disabled_legs)  # names checked before any work
     base = LocomotionEnv(make_dm_env(robot, disabled_legs=disabled_legs, time_limit=time_limit,
-                                        init_joint_noise=init_joint_noise), device=device)
+                                        init_joint_noise=init_joint_noise, terrain=terrain), device=device)
     transforms = [DoubleToFloat(), CoMState(),
-                  CatTensors(list(OBSERVATION_KEYS), out_key="observation", del_keys=False, sort=False)]
+                  CatTensors(list(OBSERVATION_KEYS), out_key="observation", del_keys=False, sort=False),
+                  DTypeCastTransform(torch.float32, torch.bool, in_keys=["foot_contacts"])]
     if disabled_legs:
         transforms.append(DisableLegs(robot, disabled_legs))
     env = TransformedEnv(base, Compose(*transforms))

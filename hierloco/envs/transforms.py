@@ -22,6 +22,7 @@ from torchrl.envs.transforms import Compose, StepCounter, Transform
 from hierloco.envs.frames import world_to_local
 from hierloco.envs.locomotion import LocomotionEnv
 from hierloco.envs.robots import LOCK_PREFIX, RobotSpec, get_robot
+from hierloco.envs.world_model import default_episodes
 
 
 class CoMState(Transform):
@@ -104,7 +105,8 @@ class TaskEpisode(Transform):
     """Which target set (episode of ``task``) each robot pursues: ``task_episode`` (``B x 1``, int64), constant.
 
     On :class:`hierloco.envs.latent_env.LatentActionEnv` with ``B`` robots, robot ``b`` pursues episode
-    ``episodes[b]`` (default ``b % task.num_episodes``). Part of :func:`task_transforms`.
+    ``episodes[b]`` (default ``b % task.num_episodes``, :func:`hierloco.envs.world_model.default_episodes`). Part of
+    :func:`task_transforms`.
 
     Args:
         task: a :class:`hierloco.envs.tasks.Task`.
@@ -119,8 +121,7 @@ class TaskEpisode(Transform):
 
     def _episode_index(self, batch: torch.Size) -> torch.Tensor:
         count = batch.numel()
-        episodes = (self.episodes if self.episodes is not None
-                    else torch.arange(count, device="cpu") % self.task.num_episodes)
+        episodes = self.episodes if self.episodes is not None else default_episodes(self.task, count)
         if episodes.numel() != count or episodes.min() < 0 or episodes.max() >= self.task.num_episodes:
             raise ValueError(f"episodes {episodes.tolist()} do not fit {count} robots and the task's "
                              f"{self.task.num_episodes} episodes")

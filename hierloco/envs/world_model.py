@@ -24,6 +24,12 @@ State keys: ``com_state`` (``5``, world ``(x, y, yaw, vx, vy)``), ``task_episode
 which a measured state holds (``measured_keys``: what planners read); with particles also ``com_state_particles``
 and ``cost_particles``, made from ``com_state`` when absent.
 
+With a task, a step that ends the task's last step (``task_step`` reaching ``task.num_steps``) sets ``done`` and
+``terminated`` (``1``, bool; ``truncated`` stays false): the task step is part of this env's state and the task
+defines no cost after its end, so its end is terminal here, as ``env.rollout`` and value targets expect. The reward
+of a step past the end is still the task's cost (a planner near the end of an episode scores its whole horizon as
+before). Without a task the env never ends.
+
 Example:
     >>> import torch
     >>> from hierloco.envs.tasks import GoalReaching
@@ -35,6 +41,13 @@ Example:
     >>> td = env.step(td.set("action", torch.tensor([[0.5, 0.0], [0.0, 0.5]])))
     >>> td["next", "com_state"][:, :2].tolist(), td["next", "task_step"].squeeze(-1).tolist()
     ([[0.5, 0.0], [0.0, 0.5]], [1, 1])
+
+    The task's end (goal reaching: 30 steps) is terminal:
+
+    >>> td = env.step(env.initial_state(episode=torch.tensor([0, 0]), step=torch.tensor([28, 29])).set(
+    ...     "action", torch.zeros(2, 2)))
+    >>> td["next", "terminated"].squeeze(-1).tolist(), td["next", "done"].squeeze(-1).tolist()
+    ([False, True], [False, True])
 
     A cost of one's own, here "reach (1, 0) and keep out of a disc of 0.3 m around (0.5, 0)":
 
@@ -64,7 +77,21 @@ from hierloco.envs.tasks import Task
 
 RISKS = ("none", "mean_std", "pessimistic")
 MEASURED_KEYS = ("com_state", "task_episode", "task_step")
+DONE_KEYS = ("done", "terminated", "truncated")
 Cost = Callable[[torch.Tensor, torch.Tensor, torch.Tensor, dict], torch.Tensor]
+
+
+def default_episodes(task: Task | None, count: int, device="cpu") -> torch.Tensor:
+    """``count`` episode indices (int64) when none are given: row ``b`` pursues episode ``b % task.num_episodes``
+    (episode 0 without a task). What :class:`hierloco.envs.transforms.TaskEpisode` writes and a planner assumes for
+    a state without ``task_episode``.
+
+        >>> from hierloco.envs.tasks import GoalReaching
+        >>> default_episodes(GoalReaching(num_goals=3), 5).tolist()
+        [0, 1, 2, 0, 1]
+    """
+    episodes = torch.arange(int(count), device=device)
+    return episodes % task.num_episodes if task is not None else torch.zeros_like(episodes)
 
 
 def risk_of(costs: torch.Tensor, risk: str, beta: float) -> torch.Tensor:
@@ -139,7 +166,8 @@ class _CoMStep(nn.Module):
 
 
 class _StepModule(TensorDictModuleBase):
-    """:class:`_CoMStep` on TensorDicts; the particle keys are made from ``com_state`` when a state lacks them."""
+    """:class:`_CoMStep` on TensorDicts; the particle keys are made from ``com_state`` when a state lacks them; the
+    done flags are set at the task's end."""
 
     def __init__(self, module: _CoMStep):
         super().__init__()
@@ -149,20 +177,28 @@ class _StepModule(TensorDictModuleBase):
         if module.particles:
             self.in_keys += ["com_state_particles", "cost_particles"]
             self.out_keys += ["com_state_particles", "cost_particles"]
+        self.out_keys += list(DONE_KEYS)
 
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
         inputs = [tensordict.get(key) for key in ("com_state", "action", "task_episode", "task_step")]
         if not self.module.particles:
-            return tensordict.update(dict(zip(self.out_keys, self.module(*inputs))))
-        com_state = inputs[0]
-        count, batch = self.module.particles, com_state.shape[:-1]
-        particles = tensordict.get("com_state_particles", None)
-        if particles is None:
-            particles = com_state.unsqueeze(-2).expand(*batch, count, 5)
-        spent = tensordict.get("cost_particles", None)
-        if spent is None:
-            spent = torch.zeros(*batch, count, dtype=com_state.dtype, device=com_state.device)
-        return tensordict.update(dict(zip(self.out_keys, self.module.particles_forward(*inputs, particles, spent))))
+            outputs = self.module(*inputs)
+        else:
+            com_state = inputs[0]
+            count, batch = self.module.particles, com_state.shape[:-1]
+            particles = tensordict.get("com_state_particles", None)
+            if particles is None:
+                particles = com_state.unsqueeze(-2).expand(*batch, count, 5)
+            spent = tensordict.get("cost_particles", None)
+            if spent is None:
+                spent = torch.zeros(*batch, count, dtype=com_state.dtype, device=com_state.device)
+            outputs = self.module.particles_forward(*inputs, particles, spent)
+        next_step = outputs[2]
+        task = self.module.task
+        ended = (next_step >= task.num_steps if task is not None
+                 else torch.zeros(next_step.shape, dtype=torch.bool, device=next_step.device))
+        flags = (ended, ended.clone(), torch.zeros_like(ended))
+        return tensordict.update(dict(zip(self.out_keys, (*outputs, *flags))))
 
 
 def _check_risk(model: nn.Module, risk: str, beta: float) -> None:
@@ -234,6 +270,8 @@ class CoMWorldModelEnv(ModelBasedEnvBase):
                 raise ValueError(f"bad action box: low {action_low}, high {action_high}")
             self.action_spec = Bounded(low, high, low.shape, device=self.device)
         self.reward_spec = Unbounded((1,), device=self.device)
+        flag = Categorical(2, (1,), dtype=torch.bool, device=self.device)
+        self.done_spec = Composite({key: flag.clone() for key in DONE_KEYS}, device=self.device)
 
     def set_task(self, task: Task | None) -> None:
         """Pursues ``task`` from now on (the model is kept): its cost scores transitions unless a ``cost`` was

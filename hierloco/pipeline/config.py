@@ -3,6 +3,12 @@
 :func:`prepare` normalises what users type (``settings=normal`` is the one-item list ``[normal]``) and collects every
 problem into one :class:`ConfigError`; recipes add their own checks through ``extra``. Only recipe code reads the
 config: the library takes keyword arguments.
+
+The import paths a config names (``planner.name=my_pkg.planning:MyPlanner``, a task's ``task: my_pkg.tasks:Patrol``,
+``dynamics.model=...``; :func:`import_paths`) are imported by the check (:func:`check_import_paths`), each refused in
+one line unless it is a class of its kind; nothing else imports them. The config checked is the user's own:
+``recipes/evaluate.py`` first refuses the import paths of a received run's ``config.yaml`` that its command line does
+not give again (``docs/pipeline.md``).
 """
 
 from __future__ import annotations
@@ -14,6 +20,7 @@ from omegaconf import DictConfig, ListConfig, OmegaConf, open_dict
 
 from hierloco.envs.faults import SETTINGS, physical_setting  # normal, the fault models, the hardware robot
 from hierloco.pipeline.errors import ConfigError
+from hierloco.registry import is_import_path
 
 LIST_OPTIONS = ("settings", "eval.videos", "logger.backends")
 
@@ -256,7 +263,9 @@ def check_dynamics(c: Checker) -> None:
     from hierloco.components.com_model import MIN_TRANSITIONS, MODELS
 
     name = get(c.cfg, "dynamics.model", "mlp")
-    if name not in MODELS and not (isinstance(name, str) and ":" in name):
+    if is_import_path(name) and name not in MODELS:
+        pass  # an import path that could not be imported: check_import_paths said why
+    elif name not in MODELS:
         c.fail(f"unknown dynamics model {name!r} (dynamics.model: choose from {', '.join(MODELS.names())})")
     else:
         try:
@@ -283,13 +292,9 @@ def check_planner(c: Checker, action_space: str = "box") -> None:
 
     name = get(c.cfg, "planner.name")
     suitable = [n for n in PLANNERS.names() if action_space in PLANNERS[n].ACTION_SPACES]
-    if isinstance(name, str) and ":" in name:
-        try:
-            PLANNERS[name]
-        except ValueError as error:
-            c.fail(str(error))
-            return
-    elif name not in suitable:
+    if is_import_path(name) and name not in PLANNERS:
+        return  # an import path that could not be imported: check_import_paths said why
+    if name not in suitable:  # an imported planner too: it must plan over this action space
         c.fail(f"unknown planner {name!r} (planner.name: choose from {', '.join(suitable)})")
         return
     c.integer("planner.horizon")
@@ -309,6 +314,8 @@ def check_planner(c: Checker, action_space: str = "box") -> None:
 
 def check_eval(c: Checker) -> dict:
     """Builds every evaluation task (so a misspelt option is caught now); returns name -> task."""
+    from hierloco.envs.tasks import TASKS
+
     tasks = {}
     try:
         specs = task_specs(c.cfg)
@@ -321,6 +328,8 @@ def check_eval(c: Checker) -> dict:
         if not isinstance(spec, dict):
             c.fail(f"eval task {name!r} must be a mapping of options, got {spec!r}")
             continue
+        if is_import_path(spec.get("task")) and spec["task"] not in TASKS:
+            continue  # an import path that could not be imported: check_import_paths said why
         try:
             tasks[name] = make_task_from_spec(name, spec)
         except ConfigError as error:
@@ -389,13 +398,66 @@ def compose_recipe(method: str, overrides: Iterable[str]) -> DictConfig:
             GlobalHydra.instance().initialize(outer)
 
 
+# ---------------------------------------------------------------------------------------------------- import paths
+def import_paths(cfg) -> dict[str, str]:
+    """Every import path (``package.module:Class``) that selects a part in ``cfg``: ``planner.name``,
+    ``dynamics.model`` and the ``task`` of each evaluation task (``eval.tasks.<name>.task``,
+    ``eval.generalization.<name>.task``), as dotted key -> path. Registered names are not listed."""
+    found = {}
+    for dotted in ("planner.name", "dynamics.model"):
+        value = get(cfg, dotted)
+        if is_import_path(value):
+            found[dotted] = value
+    for group in ("tasks", "generalization"):
+        entries = get(cfg, f"eval.{group}")
+        if isinstance(entries, DictConfig):
+            for name, spec in entries.items():
+                value = spec.get("task") if isinstance(spec, DictConfig) else None
+                if is_import_path(value):
+                    found[f"eval.{group}.{name}.task"] = value
+    return found
+
+
+def _registry_of(dotted: str):
+    """The registry an import path at ``dotted`` (a key of :func:`import_paths`) selects from, and the class its
+    parts derive from."""
+    if dotted == "planner.name":
+        from hierloco.components.planners import PLANNERS, BoxPlannerBase
+
+        return PLANNERS, BoxPlannerBase
+    if dotted == "dynamics.model":
+        from torch import nn
+
+        from hierloco.components.com_model import MODELS
+
+        return MODELS, nn.Module
+    from hierloco.envs.tasks import TASKS, Task
+
+    return TASKS, Task
+
+
+def check_import_paths(c: Checker) -> None:
+    """Imports every import path of the config (:func:`import_paths`): each must name a class of its kind (a
+    ``BoxPlannerBase`` subclass for ``planner.name``, a torch module for ``dynamics.model``, a ``Task`` for a task),
+    or it is one problem naming the key (``planner.name=os:getcwd`` names a function, ``json:JSONDecoder`` a class
+    that plans nothing). Once imported, the registries know them under their paths for the rest of the run."""
+    for dotted, reference in import_paths(c.cfg).items():
+        registry, base = _registry_of(dotted)
+        try:
+            registry.import_path(reference, base=base)
+        except ValueError as error:
+            c.fail(f"{dotted}: {error}")
+
+
 def prepare(cfg: DictConfig, checks: Callable[[Checker, Any], None] | None = None, *,
             list_options: Iterable[str] = LIST_OPTIONS) -> Any:
-    """Normalises ``cfg`` in place and checks it all (common parts, then the recipe's ``checks(checker, robot)``);
-    raises one :class:`ConfigError` naming every problem. Returns the robot description."""
+    """Normalises ``cfg`` in place and checks it all (common parts, the import paths it names, then the recipe's
+    ``checks(checker, robot)``); raises one :class:`ConfigError` naming every problem. Returns the robot
+    description."""
     as_lists(cfg, list_options)
     c = Checker(cfg)
     robot = check_common(c)
+    check_import_paths(c)
     if checks is not None:
         checks(c, robot)
     c.raise_if_any()

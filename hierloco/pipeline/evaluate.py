@@ -10,6 +10,12 @@ training stage loaded (a missing one is an error) and each evaluation cached per
 and videos go to ``<run_dir>/evaluations/<name>/`` (``name=`` a plain name; default a digest of the evaluation
 config).
 
+A run directory may come from someone else: its ``config.yaml`` and ``run.json`` are data. An import path in its
+config (``planner.name: some.module:Class``, a task's ``task:``, ``dynamics.model``;
+:func:`hierloco.pipeline.config.import_paths`) is imported only when the command line names it too, in an override
+(``planner.name=some.module:Class``) or in ``trust_imports=some.module:Class[,...]``; a registered name is used as it
+is (``docs/pipeline.md``).
+
 Example:
     python recipes/lat/train.py preset=small run_dir=runs/a1
     python recipes/evaluate.py run_dir=runs/a1 '+eval.tasks.goal_reaching_5m={task: goal_reaching, radius: 5}'
@@ -27,15 +33,18 @@ from pathlib import Path
 from hierloco.pipeline.errors import EXIT_INTERRUPTED, EXIT_USER_ERROR, ConfigError, one_line
 
 EVALUATION_KEYS = ("eval", "planner", "settings", "nthread", "device", "progress", "logger")
-USAGE = "usage: python recipes/evaluate.py [-m] run_dir=<trained run> [name=<label>] [eval/planner overrides]"
+USAGE = ("usage: python recipes/evaluate.py [-m] run_dir=<trained run> [name=<label>] [trust_imports=<pkg.mod:Class>,"
+         "...] [eval/planner overrides]")
 NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.=,-]*")
+IMPORT_PATH = re.compile(r"[A-Za-z_][\w.]*:[A-Za-z_][\w.]*")  # package.module:Class, as typed in an override
 
 
-def split_arguments(arguments: list[str]) -> tuple[str | None, str | None, bool, list[str]]:
-    """``(run_dir, name, multirun, overrides)`` of the command line."""
+def split_arguments(arguments: list[str]) -> tuple[str | None, str | None, bool, list[str], list[str]]:
+    """``(run_dir, name, multirun, overrides, trust_imports)`` of the command line; ``trust_imports=a:B,c:D`` (or
+    ``[a:B,c:D]``) lists import paths the run's own files may name."""
     run_dir = name = None
     multirun = False
-    overrides = []
+    overrides, trusted = [], []
     for argument in arguments:
         if argument in ("-m", "--multirun"):
             multirun = True
@@ -43,9 +52,11 @@ def split_arguments(arguments: list[str]) -> tuple[str | None, str | None, bool,
             run_dir = argument.split("=", 1)[1]
         elif argument.startswith("name="):
             name = argument.split("=", 1)[1]
+        elif argument.startswith("trust_imports="):
+            trusted += [item.strip() for item in argument.split("=", 1)[1].strip("[]").split(",") if item.strip()]
         else:
             overrides.append(argument)
-    return run_dir, name, multirun, overrides
+    return run_dir, name, multirun, overrides, trusted
 
 
 def check_name(name: str) -> str:
@@ -65,6 +76,8 @@ def evaluation_config(run_dir: str, overrides: list[str]):
     from hydra import compose, initialize_config_dir
     from hydra.core.global_hydra import GlobalHydra
 
+    from hierloco.io import load_yaml
+
     config = Path(run_dir) / "config.yaml"
     if not config.is_file():
         raise ConfigError(f"{run_dir} has no config.yaml: it is not a finished training run (run train.py first)")
@@ -72,6 +85,7 @@ def evaluation_config(run_dir: str, overrides: list[str]):
     if bad:
         raise ConfigError(f"evaluate.py changes only {', '.join(EVALUATION_KEYS)}; got {', '.join(bad)} (a "
                           "training change needs train.py and another run_dir)")
+    load_yaml(config)  # a received file, read safely first: no YAML bomb reaches Hydra (ArtifactError: one line)
     GlobalHydra.instance().clear()
     try:
         with initialize_config_dir(config_dir=str(config.parent.resolve()), version_base=None):
@@ -85,6 +99,26 @@ def evaluation_config(run_dir: str, overrides: list[str]):
         raise
     finally:
         GlobalHydra.instance().clear()
+
+
+def check_import_paths_given(cfg, overrides: list[str], run_dir: str, trusted=()) -> None:
+    """Refuses, in one line, the import paths of the evaluation config ``cfg`` that come from the run's own
+    ``config.yaml``, not from the command line (its ``overrides`` or ``trusted``, its ``trust_imports=``): a
+    received file never names code to import."""
+    from hierloco.pipeline.config import import_paths
+
+    bad = [item for item in trusted if not IMPORT_PATH.fullmatch(item)]
+    if bad:
+        raise ConfigError(f"trust_imports lists {', '.join(bad)}: give import paths (package.module:Class)")
+    typed = {match.group(0) for override in overrides for match in IMPORT_PATH.finditer(override)} | set(trusted)
+    received = {dotted: path for dotted, path in import_paths(cfg).items() if path not in typed}
+    if received:
+        listed = " ".join(f"{dotted}={path}" for dotted, path in received.items())
+        paths = ",".join(dict.fromkeys(received.values()))
+        them = "them" if len(received) > 1 else "it"
+        raise ConfigError(f"{Path(run_dir) / 'config.yaml'} names the import path{'s' if len(received) > 1 else ''} "
+                          f"{listed}: code named by a run directory's files is never imported; if you trust {them}, "
+                          f"add trust_imports={paths} to the command line, or choose a registered name")
 
 
 def method_of(run_dir: str):
@@ -112,21 +146,25 @@ def sweep(overrides: list[str]) -> list[list[str]]:
     return [job for batch in BasicSweeper.split_arguments(parsed, max_batch_size=None) for job in batch]
 
 
-def evaluate(run_dir: str, overrides: list[str], name: str | None = None) -> float:
-    """Evaluates the trained run in ``run_dir`` with ``overrides``; returns the headline cost."""
+def evaluate(run_dir: str, overrides: list[str], name: str | None = None, trust_imports=()) -> float:
+    """Evaluates the trained run in ``run_dir`` with ``overrides`` (``trust_imports``: import paths its config may
+    name, :func:`check_import_paths_given`); returns the headline cost."""
     from omegaconf import OmegaConf, open_dict
 
     from hierloco.pipeline.rundir import digest
 
+    from hierloco.io import inside
+
     method = method_of(run_dir)
     cfg = evaluation_config(run_dir, overrides)
+    check_import_paths_given(cfg, overrides, run_dir, trust_imports)
     trained = OmegaConf.load(Path(run_dir) / "config.yaml").get("device", "cpu")
     with open_dict(cfg):
         cfg.run_dir = run_dir
         if str(cfg.get("device")) != str(trained):  # evaluated elsewhere: the trained stages keep their keys
             cfg.trained_device = trained
     label = check_name(name) if name is not None else digest(OmegaConf.to_container(cfg, resolve=True))[:8]
-    return method.main().run(cfg, evaluation_out=Path(run_dir) / "evaluations" / label)
+    return method.main().run(cfg, evaluation_out=inside(run_dir, f"evaluations/{label}"))
 
 
 def evaluate_main(arguments: list[str] | None = None) -> None:
@@ -137,7 +175,7 @@ def evaluate_main(arguments: list[str] | None = None) -> None:
 
     os.environ.setdefault("HYDRA_FULL_ERROR", "1")
     sigterm_as_interrupt()
-    run_dir, name, multirun, overrides = split_arguments(sys.argv[1:] if arguments is None else arguments)
+    run_dir, name, multirun, overrides, trusted = split_arguments(sys.argv[1:] if arguments is None else arguments)
     try:
         with one_line_errors():
             if run_dir is None:
@@ -150,7 +188,7 @@ def evaluate_main(arguments: list[str] | None = None) -> None:
                 if multirun and name is None:
                     label = re.sub(r"[^A-Za-z0-9_.=,-]", "_", ",".join(job)) or "default"
                     print(f"evaluation {label}: {' '.join(job) or '(the run config)'}", flush=True)
-                evaluate(run_dir, job, label)
+                evaluate(run_dir, job, label, trusted)
     except KeyboardInterrupt:
         print("interrupted: finished evaluations are kept; run the same command again to resume", file=sys.stderr)
         sys.exit(EXIT_INTERRUPTED)

@@ -11,7 +11,9 @@ entry-point group ``hierloco.methods``, naming the package that holds its recipe
     my_method = "my_package.recipes.my_method"
 
 The studies (``recipes/compare``, ``recipes/ablations``, ...), ``recipes/evaluate.py`` and the tests read this
-registry; nothing else lists the methods.
+registry; nothing else lists the methods. A method is never named by an import path: the ``method`` of a run's
+``run.json`` (a file that may have come with the run directory from someone else) selects a registered recipe or
+nothing, so reading it imports no code of its own.
 
 Example:
     >>> METHODS.names()[:3]
@@ -74,6 +76,18 @@ class _Methods(Registry):
                 self._entries.setdefault(folder.name, Method(folder.name, f"recipes.{folder.name}"))
         for entry_point in importlib.metadata.entry_points(group=self.group):
             self._entries.setdefault(entry_point.name, Method(entry_point.name, entry_point.value))
+
+    def __getitem__(self, name: str) -> Method:
+        self._load_entry_points()
+        if name not in self._entries:
+            what = "a recipe folder or a hierloco.methods entry point, never an import path" if ":" in str(name) \
+                else f"methods: {', '.join(self.names())}"
+            raise ValueError(f"unknown method {name!r} ({what})")
+        return self._entries[name]
+
+    def import_path(self, reference: str, *, base: type | None = None) -> Method:
+        raise ValueError(f"method {reference!r}: a method is a recipe folder or a hierloco.methods entry point, never "
+                         "an import path")
 
 
 METHODS = _Methods("method")

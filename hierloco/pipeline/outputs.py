@@ -9,18 +9,26 @@ drawn from. A run re-draws figures from the evaluations its plan names, renders 
 changed (another planner, another task option), and removes the figures and videos it made before whose
 evaluation is no longer planned, or whose evaluation kept no recording to draw them from. Files it did not make
 (not listed) are never touched.
+
+A run directory may come from someone else, so ``outputs.json`` is data: an entry is taken only when it is a figure
+or video this module writes (:data:`MANAGED`: ``figures/*.png``, ``videos/*.mp4``), inside the output folder and
+through no symbolic link (:func:`hierloco.io.inside`); any other entry (``../thesis.tex``, ``experts.npz``,
+``figures/thesis.tex``) is left alone, with a warning. Nothing is drawn into a ``figures/`` or ``videos/`` that is a
+link.
 """
 
 from __future__ import annotations
 
 import json
 import os
-from pathlib import Path
+import stat
+from pathlib import Path, PurePosixPath
 
-from hierloco.io import write_text
+from hierloco.io import UnsafePathError, inside, write_text
 from hierloco.pipeline.errors import one_line
 
 OUTPUTS = "outputs.json"
+MANAGED = {"figures": (".png",), "videos": (".mp4",)}  # the folders this module writes into, and what it writes there
 
 
 def _rendering_available() -> str | None:
@@ -37,19 +45,54 @@ class Outputs:
         self.out, self.cfg, self.robot, self.method, self.logger = Path(out), cfg, robot, method, logger
         self.warnings: list[str] = []
         self.made: dict[str, str] = {}  # relative path -> the evaluation digest it was drawn from ("run": the run)
+        self._folders: dict[str, Path | None] = {}
         try:
-            before = json.loads((self.out / OUTPUTS).read_text())
-            self.before = {str(k): str(v) for k, v in before.get("files", {}).items()}
-        except (OSError, ValueError, AttributeError):
-            self.before = {}
+            before = json.loads(inside(self.out, OUTPUTS).read_text())
+            before = {str(k): str(v) for k, v in before.get("files", {}).items()}
+        except (OSError, ValueError, AttributeError):  # UnsafePathError too: an outputs.json that is a link
+            before = {}
+        self.before = {relative: digest for relative, digest in before.items() if self._managed(relative)}
+        foreign = sorted(set(before) - set(self.before))
+        if foreign:
+            listed = ", ".join(foreign[:3]) + (", ..." if len(foreign) > 3 else "")
+            self.note(f"{OUTPUTS} lists files this run does not write ({listed}): left as they are")
 
     def warn(self, what: str, error: BaseException) -> None:
-        line = f"{what} failed: {one_line(error)}"
+        self.note(f"{what} failed: {one_line(error)}")
+
+    def note(self, line: str) -> None:
+        """A ``warning:`` line, kept in ``report.json``'s ``warnings``."""
         print(f"warning: {line}")
         self.warnings.append(line)
 
     def _relative(self, path: Path) -> str:
         return path.relative_to(self.out).as_posix()
+
+    def _managed(self, relative: str) -> bool:
+        """Whether ``relative`` (an entry of ``outputs.json``) is a file this module writes: a figure or video
+        directly in its folder (:data:`MANAGED`), inside the output folder through no link."""
+        parts = PurePosixPath(relative).parts
+        if len(parts) != 2 or parts[0] not in MANAGED or PurePosixPath(relative).suffix not in MANAGED[parts[0]]:
+            return False
+        try:
+            inside(self.out, relative)
+        except UnsafePathError:
+            return False
+        return True
+
+    def _folder(self, name: str) -> Path | None:
+        """The output folder ``name`` (``figures``, ``videos``) to write into, or ``None`` (said once) when it is a
+        link or not a directory: nothing is written through it."""
+        if name not in self._folders:
+            try:
+                folder = inside(self.out, name)
+                if folder.exists() and not folder.is_dir():
+                    raise UnsafePathError(f"{folder} is not a directory")
+                self._folders[name] = folder
+            except UnsafePathError as error:
+                self.note(f"no {name} written: {one_line(error)}")
+                self._folders[name] = None
+        return self._folders[name]
 
     # ------------------------------------------------------------------------------------------------ draw
     def draw(self, evaluations: dict, low_level=None) -> None:
@@ -61,10 +104,10 @@ class Outputs:
         specs = task_specs(self.cfg)
         steps = int(self.cfg.steps_per_action)
         videos = set(self.cfg.eval.videos or [])
-        figures = self.out / "figures"
+        figures = self._folder("figures") if self.cfg.eval.figures else None
         for (setting, name), (stage, evaluation) in evaluations.items():
             task = make_task_from_spec(name, specs[name])
-            if self.cfg.eval.figures:
+            if figures is not None:
                 try:
                     drawn = report.task_figures(evaluation, task, self.robot, figures, method=self.method,
                                                 setting=setting, steps_per_action=steps)
@@ -78,7 +121,7 @@ class Outputs:
                     self._log(lambda: self.logger.log_image(f"figures/{path.stem}", path), f"logging {path.name}")
             if name in videos:
                 self._video(setting, name, stage, evaluation, task)
-        if low_level is not None and self.cfg.eval.figures:
+        if low_level is not None and figures is not None:
             try:
                 path = report.latent_map(low_level, self.robot, figures / "latent_map.png", method=self.method,
                                          seed=self.cfg.seed)
@@ -96,7 +139,10 @@ class Outputs:
         from hierloco.loggers import metric_component
         from hierloco.pipeline import report
 
-        path = self.out / "videos" / f"{setting}_{name}.mp4"
+        folder = self._folder("videos")
+        if folder is None:
+            return
+        path = folder / f"{setting}_{name}.mp4"
         relative = self._relative(path)
         if path.exists() and self.before.get(relative) == stage.digest:
             self.made[relative] = stage.digest  # drawn from this very evaluation: kept
@@ -119,14 +165,16 @@ class Outputs:
                                                 fps=report.VIDEO_FPS), f"logging the video of {setting}/{name}")
 
     def _remove_stale(self) -> None:
-        """Removes what an earlier finish made (listed in its ``outputs.json``) and this one did not."""
+        """Removes what an earlier finish made (listed in its ``outputs.json``, a figure or video of its folders:
+        :meth:`_managed`) and this one did not; only plain files, never through a link."""
         for relative in sorted(set(self.before) - set(self.made)):
-            path = self.out / relative
-            if ".." in Path(relative).parts or Path(relative).is_absolute():
-                continue  # not a path this module writes
             try:
-                path.unlink(missing_ok=True)
-            except OSError as error:
+                path = inside(self.out, relative)  # checked again now: nothing may have become a link since
+                if stat.S_ISREG(os.lstat(path).st_mode):
+                    path.unlink()
+            except FileNotFoundError:
+                pass
+            except (OSError, UnsafePathError) as error:
                 self.warn(f"removing the stale {relative}", error)
 
     # ------------------------------------------------------------------------------------------------ log

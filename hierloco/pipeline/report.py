@@ -6,11 +6,16 @@ so a finished run can draw them again, or render a video it did not render befor
 
 from __future__ import annotations
 
+import functools
+import json
+import math
 from pathlib import Path
+from typing import Mapping
 
 import numpy as np
 
 from hierloco.envs.robots import CONTROL_TIMESTEP
+from hierloco.io import ArtifactError
 from hierloco.results import TaskEvaluation, episode_rows
 
 VIDEO_FPS = 20
@@ -39,6 +44,99 @@ def task_evaluation(rollout, task, *, method: str, robot: str, setting: str, see
                      "qpos": rollout.qpos[:1]}
     return TaskEvaluation(rows, metrics, recording, {"task": task.name, "setting": setting, "method": method,
                                                      "robot": robot, "seed": int(seed)})
+
+
+ROW_TOLERANCE = 1e-9  # relative: a row and what it is derived from are the same float64 computation
+
+
+def _same(stored, derived) -> bool:
+    """Whether a row's number is what was derived (both NaN, or equal within :data:`ROW_TOLERANCE`)."""
+    if not isinstance(stored, (int, float)) or isinstance(stored, bool):
+        return False
+    if math.isnan(stored) or math.isnan(derived):
+        return math.isnan(stored) and math.isnan(derived)
+    return abs(stored - derived) <= ROW_TOLERANCE * max(1.0, abs(derived))
+
+
+@functools.lru_cache(maxsize=32)
+def _task(name: str, spec_text: str):
+    """The task an evaluation stage evaluates, made once per process (a navigation task plans its path: seconds)."""
+    from hierloco.pipeline.config import make_task_from_spec
+
+    return make_task_from_spec(name, json.loads(spec_text))
+
+
+def derived_rows(evaluation: TaskEvaluation, params: Mapping) -> tuple[str | None, dict[str, list]]:
+    """What an evaluation's rows are derived from its recording (``com_paths``) and its stage's ``params``
+    (``task_name``, ``task``): the task's name (the rows' label) and, per episode, ``final_error``, ``success`` and
+    the task's extra metrics (:meth:`hierloco.envs.tasks.Task.extra_metrics`), scored as
+    :func:`hierloco.components.evaluation.run_task` scores them (:meth:`hierloco.envs.tasks.Task.evaluate` on the
+    states after each action). The start state is not recorded: a number that depends on it is ``None`` (not
+    derived). ``(None, {})`` when the stage names no task; no numbers when the evaluation kept no recording."""
+    import torch
+
+    if "task_name" not in params or "task" not in params:
+        return None, {}
+    task = _task(params["task_name"], json.dumps(params["task"], sort_keys=True))
+    paths = evaluation.recording.get("com_paths")
+    if paths is None:
+        return task.name, {}
+    if paths.ndim != 3 or paths.shape[2] != 5 or paths.shape[1] % task.num_steps or not paths.shape[1]:
+        raise ArtifactError(f"its recorded CoM paths have shape {tuple(paths.shape)}, not E x ({task.num_steps} x N) "
+                            "x 5")
+    count, per_action = paths.shape[0], paths.shape[1] // task.num_steps
+    episodes = torch.arange(count) % task.num_episodes
+    after = torch.as_tensor(np.asarray(paths[:, per_action - 1::per_action]), dtype=torch.float64)
+    unknown, known = (task.evaluate(torch.cat([start, after], 1), episodes) for start in (
+        torch.full((count, 1, 5), float("nan"), dtype=torch.float64), task.start_state().double().expand(count, 1, 5)))
+    independent = (unknown.final_error == known.final_error) | (np.isnan(unknown.final_error)
+                                                                & np.isnan(known.final_error))
+    derived = {name: [float(v) if ok else None for v, ok in zip(getattr(known, name), independent)]
+               for name in ("final_error", "success")}  # success follows from the final error
+    for name, values in task.extra_metrics(paths, episodes.numpy()).items():
+        derived[name] = [float(v) for v in np.asarray(values, dtype=np.float64)]
+    return task.name, derived
+
+
+def checked_rows(evaluation: TaskEvaluation, params: Mapping, where) -> list[dict]:
+    """The per-episode rows of an evaluation, checked against what they are derived from (``docs/pipeline.md``,
+    "What a record's digest protects"): their labels against the evaluation stage's ``params`` (setting, task, seed)
+    and the evaluation's metadata (method, robot), their episodes numbered in order, their means against the summary
+    saved with them, and each ``success``, ``final_error`` and extra metric against :func:`derived_rows` (its
+    recording). Raises :class:`hierloco.io.ArtifactError` naming ``where`` and the first difference."""
+    rows, meta = evaluation.rows, evaluation.metadata
+    try:
+        task_name, derived = derived_rows(evaluation, params)
+    except ArtifactError as error:
+        raise ArtifactError(f"{where}: {error}") from None
+    expected = {"task": task_name or meta.get("task"), "setting": params.get("setting", meta.get("setting")),
+                "seed": params.get("seed", meta.get("seed")), "method": meta.get("method"), "robot": meta.get("robot")}
+    problems = [f"its metadata names {label} {meta[label]!r}, its stage {expected[label]!r}"
+                for label in ("task", "setting", "seed") if label in meta and meta[label] != expected[label]]
+    for index, row in enumerate(rows):
+        for label, value in expected.items():
+            if value is not None and row.get(label) != value:
+                problems.append(f"row {index} is labelled {label} {row.get(label)!r}, its evaluation is of "
+                                f"{label} {value!r}")
+        if row.get("episode") != index:
+            problems.append(f"row {index} is numbered episode {row.get('episode')!r}")
+    if "com_paths" in evaluation.recording and len(evaluation.recording["com_paths"]) != len(rows):
+        problems.append(f"{len(rows)} rows for {len(evaluation.recording['com_paths'])} recorded episodes")
+    for name, values in derived.items():
+        for index, (row, value) in enumerate(zip(rows, values)):
+            if value is not None and not _same(row.get(name), value):
+                problems.append(f"episode {index}'s {name} is {row.get(name)!r}, its recorded CoM path gives "
+                                f"{value:.6g}")
+    for name, summary in (("final_error", "final_error"), ("success", "success_rate")):
+        values = [row.get(name) for row in rows]
+        if summary in evaluation.metrics and all(isinstance(v, (int, float)) for v in values) and not _same(
+                float(np.mean(values)), float(evaluation.metrics[summary])):
+            problems.append(f"its rows' mean {name} {np.mean(values):.4g} differs from the summary it was saved with "
+                            f"({evaluation.metrics[summary]:.4g})")
+    if problems:
+        more = f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""
+        raise ArtifactError(f"{where}: its rows do not follow from its recording and its stage: {problems[0]}{more}")
+    return [dict(row) for row in rows]
 
 
 def log_evaluation(logger, evaluation: TaskEvaluation, setting: str, name: str) -> None:

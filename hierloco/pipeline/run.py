@@ -170,12 +170,15 @@ class Run:
             raise ConfigError(f"stage {stage.name!r} is not finished in {self.path}: train the run first (train.py)")
         if stage.trains and not self._robot_checked and not self.dir.check(stage.name, stage.key, stage.filename):
             build = self._checking_the_robot_first(build)
+        build = self._announced(stage, build)
         timings: dict = {}
         try:
             with temporaries_in(self.path):
                 artifact = self.dir.stage(stage.name, stage.key, lambda: build(self, stage.params, *inputs),
                                           lambda a, path: _save_without_wall_clock(a, path, timings),
                                           stage.artifact_class.load, stage.filename)
+            if self.dir.reused.get(stage.name):
+                self._announce(stage, "cached")
         except findings() as error:  # a finding about the setting: kept, so a study need not run it again
             if not self.dir.readonly:
                 with temporaries_in(self.path):
@@ -193,6 +196,18 @@ class Run:
             summary = getattr(artifact, "summary", None)  # what the artifact says of itself, else its metadata
             self.reports[stage.name] = summary() if callable(summary) else dict(getattr(artifact, "metadata", artifact))
         return artifact
+
+    def _announce(self, stage: Stage, what: str) -> None:
+        """One line per stage, whatever ``progress`` says (its bars are the only other sign of life)."""
+        print(f"[{time.perf_counter() - self.start:5.0f} s] stage {stage.name}: {what}", flush=True)
+
+    def _announced(self, stage: Stage, build: Callable) -> Callable:
+        """``build``, after the stage's line."""
+        def announced(*args):
+            self._announce(stage, "building")
+            return build(*args)
+
+        return announced
 
     def _checking_the_robot_first(self, build: Callable) -> Callable:
         """``build``, preceded (once per run) by the robot description's checks, which take milliseconds: a robot
@@ -280,10 +295,19 @@ class Run:
         self.close()
 
 
-def check_owner(directory: RunDirectory, method: str, cfg, robot) -> None:
-    """Refuses a run directory made by another method, or for another robot or seed (its ``run.json``)."""
+def check_owner(directory: RunDirectory, method: str, cfg, robot, filenames: Iterable[str] = ()) -> None:
+    """Refuses a run directory made by another method, or for another robot or seed (its ``run.json``); without a
+    ``run.json``, one holding files that the plan (its stages' ``filenames``) does not make: whose they are cannot be
+    established (:meth:`RunDirectory.foreign_artifacts`)."""
     manifest = directory.path / MANIFEST
     if not manifest.is_file():
+        foreign = directory.foreign_artifacts(filenames)
+        if foreign:
+            listed = ", ".join(foreign[:4]) + (", ..." if len(foreign) > 4 else "")
+            raise RunDirectoryError(f"run directory {directory.path} has no {MANIFEST} (which names the method that "
+                                    f"made it) yet holds files {method}'s plan does not make ({listed}): another "
+                                    f"run's, which {method} would overwrite; restore its {MANIFEST} or choose another "
+                                    "run_dir")
         return
     try:
         made = json.loads(manifest.read_text())
@@ -321,7 +345,10 @@ def open_run(cfg: DictConfig, method: str, plan: Callable, checks: Callable | No
     specs = [stage.spec for stage in planned.stages()]
     if not multirun:
         directory.check_free()  # another process's run is named first: its stages may not match ours yet
-    check_owner(directory, method, cfg, robot)
+    from hierloco.pipeline.tuning import FILENAME as TUNING_FILE
+
+    owned = [spec.filename for spec in specs] + ([TUNING_FILE] if tuning is not None else [])  # what it makes
+    check_owner(directory, method, cfg, robot, owned)
     done = directory.verify(specs)  # before anything is written
     unfinished = [stage.name for stage in planned.stages() if stage.trains and not done[stage.name]]
     if evaluation_out is not None and unfinished:
@@ -332,7 +359,7 @@ def open_run(cfg: DictConfig, method: str, plan: Callable, checks: Callable | No
                  confirmed=bool(cfg.get("confirm_long", False)))
     directory.acquire(wait=multirun)
     try:
-        check_owner(directory, method, cfg, robot)
+        check_owner(directory, method, cfg, robot, owned)
         directory.verify(specs)  # again, now that no other process can write it
         logger = None
         if not directory.readonly:
@@ -372,7 +399,7 @@ def tune_first(cfg, method: str, robot, directory: RunDirectory, multirun: bool)
     stage = tuning_stage(cfg, robot)
     if not multirun:
         directory.check_free()
-    check_owner(directory, method, cfg, robot)
+    check_owner(directory, method, cfg, robot, [stage.filename])
     directory.verify([stage.spec])
     directory.acquire(wait=multirun)
     try:

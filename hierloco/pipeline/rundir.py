@@ -10,7 +10,14 @@ any work, so a refused run writes nothing. A killed run resumes at its first unf
 
 One process at a time writes a run directory: :meth:`RunDirectory.acquire` takes an exclusive ``flock`` on
 ``.lock`` (the kernel releases it when the holder dies, so a killed run's lock is taken over) and a second process is
-refused at once with a message naming the holder (or, asked to, waits for it). A directory the process may not write
+refused at once with a message naming the holder (or, asked to, waits for it). The lock is opened without following
+a link (``O_NOFOLLOW``) and written only when it is a plain file of its own: a ``.lock`` that is a symbolic link (or
+a hard link, or no file) in a received directory is refused in one line, its target untouched.
+
+A run directory may come from someone else (``docs/pipeline.md``, "Received run directories are data"): stage files
+are found only inside it (:func:`hierloco.io.inside`), :meth:`RunDirectory.verify` refuses a directory holding a link
+that leads out of it, and :meth:`RunDirectory.foreign_artifacts` names the stage artifacts a plan did not make, so
+that a directory whose ``run.json`` is lost is not taken over by another method. A directory the process may not write
 is opened read-only: every stage must then be finished, and nothing is written. :func:`check_run_dir` refuses, before
 anything is written, a path that cannot be a run directory: empty, ``/``, the home or working directory, a file, a
 symlink loop, or a directory of other files that hierloco did not make.
@@ -29,12 +36,14 @@ Example:
 
 from __future__ import annotations
 
+import errno
 import fcntl
 import functools
 import hashlib
 import json
 import os
 import socket
+import stat
 import sys
 import time
 from dataclasses import dataclass
@@ -43,7 +52,7 @@ from typing import Any, Callable, Iterable, TypeVar
 
 import numpy as np
 
-from hierloco.io import TEMPORARY_PREFIX, ArtifactError, write_text
+from hierloco.io import TEMPORARY_PREFIX, ArtifactError, inside, write_text
 
 T = TypeVar("T")
 LOCK_NAME = ".lock"
@@ -77,8 +86,8 @@ def is_run_directory(path: Path) -> bool:
 
 def check_run_dir(value) -> Path:
     """``value`` as a run directory path, or :class:`RunDirectoryError` naming why it cannot be one: empty, ``/``,
-    the home directory, the working directory itself (or one of its parents), an existing file, a symlink loop, or
-    a non-empty directory that hierloco did not make. Nothing is written."""
+    the home directory, the working directory itself (or one of its parents), an existing file (or a path under
+    one), a symlink loop, or a non-empty directory that hierloco did not make. Nothing is written."""
     text = "" if value is None else str(value)
     if not text.strip():
         raise RunDirectoryError("run_dir is empty: give a directory for the run (or leave run_dir unset)")
@@ -96,6 +105,9 @@ def check_run_dir(value) -> Path:
         raise RunDirectoryError(f"run_dir={text} is a broken symbolic link")
     if resolved.exists() and not resolved.is_dir():
         raise RunDirectoryError(f"run_dir={text} is an existing file, not a directory")
+    existing = next((parent for parent in resolved.parents if parent.exists()), None)
+    if existing is not None and not existing.is_dir():  # run_dir=<file>/sub: no directory can be made under it
+        raise RunDirectoryError(f"run_dir={text} is under {existing}, which is a file, not a directory")
     if resolved.is_dir():
         try:
             entries = [entry.name for entry in resolved.iterdir()]
@@ -142,13 +154,53 @@ def cpu_description() -> str:
     return f"{name} ({torch.backends.cpu.get_cpu_capability()})"
 
 
-def _describe_holder(lock: Path) -> str:
+def _describe_holder(fd: int) -> str:
+    """Who holds the lock open as ``fd`` (what its holder wrote into it)."""
     try:
-        info = json.loads(lock.read_text() or "{}")
-    except (OSError, json.JSONDecodeError):
+        info = json.loads(os.pread(fd, 65536, 0).decode() or "{}")
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        info = {}
+    if not isinstance(info, dict):
         info = {}
     return f"pid {info.get('pid', '?')} on {info.get('host', '?')} since {info.get('started', '?')}: " \
            f"{info.get('command', '?')}"
+
+
+def _open_lock(lock: Path, flags: int) -> int:
+    """``lock`` opened with ``flags``, never through a symbolic link; refused (:class:`RunDirectoryError`) unless it
+    is a plain file with no other name (a hard link would let the lock's JSON overwrite another file)."""
+    try:
+        fd = os.open(lock, flags | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC, 0o644)
+    except OSError as error:
+        if error.errno == errno.ELOOP:
+            raise RunDirectoryError(f"{lock} is a symbolic link, not the lock file hierloco makes: remove the link "
+                                    "(its target is left as it is) or choose another run_dir") from None
+        raise
+    info = os.fstat(fd)
+    if not stat.S_ISREG(info.st_mode) or info.st_nlink != 1:
+        os.close(fd)
+        what = "not a plain file" if not stat.S_ISREG(info.st_mode) else f"a file with {info.st_nlink} names"
+        raise RunDirectoryError(f"{lock} is {what}, not the lock file hierloco makes: remove it or choose another "
+                                "run_dir")
+    return fd
+
+
+def outward_links(root: Path) -> list[str]:
+    """The symbolic links under ``root`` (relative paths) that lead out of it or nowhere; links that stay inside
+    (a tracker's ``latest-run``) are not listed."""
+    top = root.resolve()
+    found = []
+    for folder, directories, files in os.walk(root):
+        for name in directories + files:
+            path = Path(folder, name)
+            if path.is_symlink():
+                try:
+                    target = path.resolve(strict=True)
+                except (OSError, RuntimeError):
+                    target = None
+                if target is None or not target.is_relative_to(top):
+                    found.append(path.relative_to(root).as_posix())
+    return sorted(found)
 
 
 def _diff(stored: dict, wanted: dict, prefix: str = "") -> list[str]:
@@ -200,15 +252,15 @@ class RunDirectory:
     def holder(self) -> str | None:
         """Who holds the run directory (pid, host, start, command), or ``None`` when it is free. Writes nothing."""
         lock = self.path / LOCK_NAME
-        if not lock.exists() or self._lock_fd is not None:
+        if self._lock_fd is not None or not (lock.is_symlink() or lock.exists()):
             return None
-        fd = os.open(lock, os.O_RDONLY)
+        fd = _open_lock(lock, os.O_RDONLY)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             fcntl.flock(fd, fcntl.LOCK_UN)
             return None
         except BlockingIOError:
-            return _describe_holder(lock)
+            return _describe_holder(fd)
         finally:
             os.close(fd)
 
@@ -227,8 +279,7 @@ class RunDirectory:
         if self.readonly or self._lock_fd is not None:
             return
         self.path.mkdir(parents=True, exist_ok=True)
-        lock = self.path / LOCK_NAME
-        fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+        fd = _open_lock(self.path / LOCK_NAME, os.O_RDWR | os.O_CREAT)
         said = False
         while True:
             try:
@@ -236,11 +287,12 @@ class RunDirectory:
                 break
             except BlockingIOError:
                 if not wait:
+                    holder = _describe_holder(fd)
                     os.close(fd)
-                    raise RunLockedError(f"run directory {self.path} is in use by {_describe_holder(lock)}; wait for "
-                                         "it to finish or choose another run_dir") from None
+                    raise RunLockedError(f"run directory {self.path} is in use by {holder}; wait for it to finish "
+                                         "or choose another run_dir") from None
                 if not said:
-                    print(f"waiting for run directory {self.path}, in use by {_describe_holder(lock)}", flush=True)
+                    print(f"waiting for run directory {self.path}, in use by {_describe_holder(fd)}", flush=True)
                     said = True
                 time.sleep(poll)
         info = {"pid": os.getpid(), "host": socket.gethostname(), "started": time.strftime("%Y-%m-%d %H:%M:%S"),
@@ -249,7 +301,7 @@ class RunDirectory:
         os.pwrite(fd, json.dumps(info).encode(), 0)
         self._lock_fd = fd
         for leftover in self.path.glob(f"{TEMPORARY_PREFIX}*"):  # half-written files of a killed run
-            if leftover.is_file():
+            if stat.S_ISREG(os.lstat(leftover).st_mode):  # plain files only: nothing is removed through a link
                 leftover.unlink(missing_ok=True)
 
     def release(self) -> None:
@@ -297,11 +349,27 @@ class RunDirectory:
         write_text(self.path / BUILDS_NAME, json.dumps(builds, indent=1, sort_keys=True))
 
     def key_path(self, filename: str) -> Path:
-        return self.path / f"{filename}.key.json"
+        return inside(self.path, f"{filename}.key.json")
+
+    def foreign_artifacts(self, filenames: Iterable[str]) -> list[str]:
+        """What at the top level of the directory a plan making ``filenames`` cannot claim, sorted: the stage
+        artifacts (files with a ``<file>.key.json``) it does not make, or, when the directory holds no stage key at
+        all, every file but the lock and temporary files (a run's results without the stages that would tell whose
+        they are). Empty for a new or empty directory and for one holding only the plan's stages."""
+        planned = {f"{name}.key.json" for name in filenames}
+        try:
+            entries = [name for name in os.listdir(self.path)
+                       if name != LOCK_NAME and not name.startswith(TEMPORARY_PREFIX)]
+        except (FileNotFoundError, NotADirectoryError):
+            return []
+        keys = [name for name in entries if name.endswith(".key.json")]
+        if not keys:
+            return sorted(entries)
+        return sorted(name.removesuffix(".key.json") for name in keys if name not in planned)
 
     def check(self, name: str, key: dict, filename: str) -> bool:
         """True if the stage is done with this key, False if not started; raises on a mismatch."""
-        artifact, key_path = self.path / filename, self.key_path(filename)
+        artifact, key_path = inside(self.path, filename), self.key_path(filename)
         if not artifact.exists():
             return False
         if not key_path.exists():
@@ -323,7 +391,14 @@ class RunDirectory:
     def verify(self, plan: Iterable[StageSpec]) -> dict[str, bool]:
         """Checks every stage of ``plan`` against the directory before any work: ``name -> done``. Raises one
         :class:`ConfigMismatchError` listing every mismatched stage, or :class:`ReadOnlyRunError` when the directory
-        is read-only and a stage is not done."""
+        is read-only and a stage is not done; a :class:`RunDirectoryError` when the directory holds a symbolic link
+        that leads out of it (:func:`outward_links`: what is written there would land elsewhere)."""
+        links = outward_links(self.path) if self.path.is_dir() else []
+        if links:
+            listed = ", ".join(links[:3]) + (", ..." if len(links) > 3 else "")
+            raise RunDirectoryError(f"run directory {self.path} holds symbolic links that lead out of it ({listed}): "
+                                    "hierloco writes only inside its run directory; remove them or choose another "
+                                    "run_dir")
         done, problems = {}, []
         for spec in plan:
             try:
@@ -343,7 +418,7 @@ class RunDirectory:
     def stage(self, name: str, key: dict, build: Callable[[], T], save: Callable[[T, Path], Any],
               load: Callable[[Path], T], filename: str) -> T:
         """The result of stage ``name``: cached if done with ``key``, else built and saved."""
-        artifact = self.path / filename
+        artifact = inside(self.path, filename)
         start = time.perf_counter()
         self.current = name
         if self.check(name, key, filename):

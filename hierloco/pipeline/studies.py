@@ -5,8 +5,9 @@ A :class:`Job` is one recipe run (``recipes/<method>/train.py`` with overrides, 
 started for the study, or on the cluster at ``address`` / ``RAY_ADDRESS``. Each job runs the recipe in a subprocess
 with as many simulation and torch threads as it has cores, so jobs never oversubscribe the machine. Finished jobs
 are reused from their run directories (a killed study, re-run, resubmits only what did not finish); a failed job
-is reported with its run directory and the others go on; the rows of every job come back to the driver through Ray,
-so a cluster without shared storage works too (``fetch_run_dirs=True`` also brings each run directory back). A job's
+is reported with its run directory and the others go on; the rows and record of every job come back to the driver
+through Ray, and on a cluster its run directory and log too, so a cluster without shared storage works
+(:func:`ray_session`; ``docs/pipeline.md``, "Studies on a Ray cluster"). A job's
 rows are read from the evaluation artifacts its plan names (never from a loose CSV), so a run directory re-run with
 another config is run again, not misreported. With a ``records`` directory (:mod:`hierloco.pipeline.records`) every
 finished job also leaves its verified record there, and a job whose run directory is missing is taken from its
@@ -26,13 +27,16 @@ Example:
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import tarfile
+import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -41,7 +45,6 @@ from typing import Sequence
 from hierloco.io import write_text
 from hierloco.pipeline import records as job_records
 from hierloco.pipeline.errors import ConfigError
-from hierloco.envs.batched_sim import available_cores
 from hierloco.pipeline.methods import METHODS
 
 DONE = "job.json"  # written into a job's run directory when it finished
@@ -131,13 +134,20 @@ def _plan_or_none(job: Job):
 
 def evaluation_rows(run_dir: str | os.PathLike, specs) -> list[dict]:
     """The per-episode rows of a finished job: from the evaluation artifacts its plan names (``specs``), each
-    validated as it loads. Raises :class:`hierloco.io.ArtifactError` naming a bad one."""
+    validated as it loads and its rows checked against what they are derived from (its recording, its stage's
+    labels, its summary: :func:`hierloco.pipeline.report.checked_rows`). Raises :class:`hierloco.io.ArtifactError`
+    naming a bad one."""
+    from hierloco.pipeline.report import checked_rows
+    from hierloco.pipeline.validate import check_evaluation
     from hierloco.results import TaskEvaluation
 
     rows = []
     for spec in specs:
         if spec.name.startswith("evaluation_"):
-            rows += TaskEvaluation.load(Path(run_dir) / spec.filename).rows
+            path = Path(run_dir) / spec.filename
+            evaluation = TaskEvaluation.load(path)
+            check_evaluation(evaluation, path)
+            rows += checked_rows(evaluation, spec.key.get("params", {}), path)
     return rows
 
 
@@ -174,12 +184,27 @@ def _json_file(path: Path) -> dict:
 
 
 def run_record(job: Job, specs) -> dict:
-    """The record of the job finished in its run directory (rows from its planned evaluations)."""
+    """The record of the job finished in its run directory: its rows derived from its planned evaluations
+    (:func:`evaluation_rows`), and what its stages took as its ``job.json`` kept it when it finished
+    (:func:`done_text`), not as a later run of the directory with another config left ``report.json`` and
+    ``builds.json`` (a ``job.json`` from before it kept them gives those files as they are)."""
     run_dir = Path(job.run_dir)
     done = _json_file(run_dir / DONE)
+
+    def kept(name: str) -> dict:
+        return done[name] if isinstance(done.get(name), dict) else _json_file(run_dir / f"{name}.json")
+
     return job_records.make_record(job.signature(), specs, rows=evaluation_rows(run_dir, specs),
-                                   report=_json_file(run_dir / "report.json"),
-                                   builds=_json_file(run_dir / "builds.json"), seconds=done.get("seconds"))
+                                   report=kept("report"), builds=kept("builds"), seconds=done.get("seconds"))
+
+
+def done_text(job: Job, seconds: float) -> str:
+    """``job.json``, written when the job finished: its signature, its wall-clock, and what its stages took as its
+    run left them (its ``report.json`` and ``builds.json`` now), so its record keeps the timings of the build it
+    reports (:func:`run_record`)."""
+    run_dir = Path(job.run_dir)
+    return json.dumps({"signature": job.signature(), "seconds": seconds, "report": _json_file(run_dir / "report.json"),
+                       "builds": _json_file(run_dir / "builds.json")})
 
 
 def finding_record(job: Job, specs, finding: dict) -> dict:
@@ -229,23 +254,49 @@ def found(job: Job, records: str | None = None, specs=None) -> tuple[str, str, d
 
 def execute(job: Job, fetch_run_dir: bool = False) -> dict:
     """Runs one job here (in a subprocess); returns its outcome, its result rows (from the evaluation artifacts its
-    plan names), its record and optionally its run directory as a tar archive. This is the body of the Ray task. A
-    job that ends in a finding (the recipe's ``failed.json``) comes back with ``finding`` set and its record."""
+    plan names) and its record. This is the body of the Ray task. A job that ends in a finding (the recipe's
+    ``failed.json``) comes back with ``finding`` set and its record. With ``fetch_run_dir`` (a job on a cluster) the
+    outcome also holds this run's part of the job's log (``log``, bytes) and, when the job finished or ended in a
+    finding, its run directory as a gzipped tar archive (``archive``): the driver unpacks them
+    (:func:`bring_back`)."""
+    log = job_log(job)
+    log.parent.mkdir(parents=True, exist_ok=True)
+    logged = log.stat().st_size if log.exists() else 0  # where this run's part of the log begins
+    outcome = _execute(job, log)
+    if fetch_run_dir:
+        outcome["log"] = log.read_bytes()[logged:]
+        if outcome["ok"] or outcome["finding"]:
+            outcome["archive"] = pack(job.run_dir)
+    return outcome
+
+
+def pack(run_dir: str | os.PathLike) -> bytes:
+    """A run directory as a gzipped tar archive (its paths relative to it), as a job on a cluster sends it back."""
+    buffer = io.BytesIO()
+    with tarfile.open(fileobj=buffer, mode="w:gz") as archive:
+        archive.add(run_dir, arcname=".")
+    return buffer.getvalue()
+
+
+def job_log(job: Job) -> Path:
+    """The log of a job's recipe runs: ``<run_dir>.log`` beside its run directory."""
+    return Path(job.run_dir).parent / f"{Path(job.run_dir).name}.log"
+
+
+def _execute(job: Job, log: Path) -> dict:
     start = time.perf_counter()
     if job.reuse_from:
         _reuse_stages(job)
     (Path(job.run_dir) / job_records.FAILED).unlink(missing_ok=True)  # only this run's finding counts
     env = {**os.environ, "OMP_NUM_THREADS": str(job.cores), "MKL_NUM_THREADS": str(job.cores),
            "WANDB_SILENT": "true"}
-    log = Path(job.run_dir).parent / f"{Path(job.run_dir).name}.log"
-    log.parent.mkdir(parents=True, exist_ok=True)
     with open(log, "a") as out:  # appended: a re-run (reusing stages) keeps the log of the run that built them
         out.write(f"=== {time.strftime('%Y-%m-%d %H:%M:%S UTC', time.gmtime())}: {' '.join(job.command())}\n")
         out.flush()
         code = subprocess.run(job.command(), stdout=out, stderr=subprocess.STDOUT, cwd=os.getcwd(),
                               env={**env, PARENT_PID: str(os.getpid())}).returncode
     outcome = {"ok": code == 0, "seconds": time.perf_counter() - start, "rows": [], "error": "", "archive": None,
-               "record": None, "finding": False}
+               "log": None, "record": None, "finding": False}
     specs = _plan_or_none(job)
     if code != 0:
         failure = job_records.run_finding(job.run_dir)
@@ -258,18 +309,13 @@ def execute(job: Job, fetch_run_dir: bool = False) -> dict:
         tail = log.read_text().strip().splitlines()[-3:]
         outcome["error"] = f"exit code {code}: " + " | ".join(tail) + f" (log: {log})"
         return outcome
-    write_text(Path(job.run_dir) / DONE, json.dumps({"signature": job.signature(), "seconds": outcome["seconds"]}))
+    write_text(Path(job.run_dir) / DONE, done_text(job, outcome["seconds"]))
     try:
         record = run_record(job, specs)
     except Exception as error:  # noqa: BLE001  (an evaluation artifact that does not load: the job is not usable)
         outcome.update(ok=False, error=f"its results cannot be read: {error} (log: {log})")
         return outcome
     outcome.update(rows=record["rows"], record=record, report=record["report"], builds=record["builds"])
-    if fetch_run_dir:
-        buffer = io.BytesIO()
-        with tarfile.open(fileobj=buffer, mode="w:gz") as archive:
-            archive.add(job.run_dir, arcname=".")
-        outcome["archive"] = buffer.getvalue()
     return outcome
 
 
@@ -353,23 +399,80 @@ def _progress(done: int, running: int, failed: int, pending: int, start: float, 
     return line
 
 
-def check_records(records) -> None:
-    """See :func:`hierloco.pipeline.records.check_records`."""
-    job_records.check_records(records)
+def check_records(records, jobs: Sequence[Job] = ()) -> None:
+    """See :func:`hierloco.pipeline.records.check_records` (with the run directories ``jobs`` plan) and
+    :func:`hierloco.pipeline.records.check_configs` (one config per job in a records directory)."""
+    job_records.check_records(records, [job.run_dir for job in jobs])
+    job_records.check_configs(records, [(job.run_dir, job.signature()) for job in jobs])
 
 
 def _from_records(job: Job, records: str | None, specs) -> tuple[Path, dict] | None:
     """The job's current record and where it lies: under the study's ``records``, else under the directory
-    ``job.records_from`` names (read only), else ``None``."""
+    ``job.records_from`` names (read only), else ``None``. Where the job's run directory holds evaluations its plan
+    names (a record that came with its run directory), the record's rows are re-derived from them
+    (:func:`evaluation_rows`) and must be the same: a record whose rows differ is refused
+    (:class:`hierloco.pipeline.records.RecordError`, one line naming both)."""
     for root in (records, job.records_from):
         if root and (record := recorded(job, root, specs)) is not None:
-            return job_records.record_dir(root, job.run_dir), record
+            directory = job_records.record_dir(root, job.run_dir)
+            _check_with_run(job, specs, record, directory / job_records.RECORD)
+            return directory, record
     return None
 
 
+def _check_with_run(job: Job, specs, record: dict, where: Path) -> None:
+    """Refuses ``record`` when its rows differ from those derived from the evaluations its job's run directory holds
+    with today's keys (none there: nothing to compare)."""
+    from hierloco.pipeline.rundir import RunDirectory
+
+    if not Path(job.run_dir).is_dir():
+        return
+    run = RunDirectory(job.run_dir, readonly=True)
+    present = []
+    for spec in specs:
+        try:
+            if spec.name.startswith("evaluation_") and run.check(spec.name, spec.key, spec.filename):
+                present.append(spec)
+        except Exception:  # noqa: BLE001  (made with another config, or unreadable: not this record's evaluation)
+            continue
+    if not present:
+        return
+    order = lambda row: (str(row.get("setting")), str(row.get("task")), row.get("episode", 0))  # noqa: E731
+    derived = sorted(evaluation_rows(job.run_dir, present), key=order)
+    groups = {(row["setting"], row["task"]) for row in derived}
+    held = sorted((row for row in record["rows"] if (row.get("setting"), row.get("task")) in groups), key=order)
+    if job_records.canonical(held) == job_records.canonical(derived):
+        return
+    first = f"{len(derived)} rows there, {len(held)} in the record"
+    for there, here in zip(derived, held):
+        differ = [name for name in sorted(set(there) | set(here))
+                  if job_records.canonical(there.get(name)) != job_records.canonical(here.get(name))]
+        if differ:
+            first = (f"{there.get('setting')}/{there.get('task')} episode {there.get('episode')}: " + ", ".join(
+                f"{name} {there.get(name)!r} there, {here.get(name)!r} in the record" for name in differ[:2]))[:300]
+            break
+    raise job_records.RecordError(f"record {where}: its rows differ from the evaluations in the job's run directory "
+                                  f"{job.run_dir} ({first}); the record or that run directory was edited: remove the "
+                                  "one you do not trust")
+
+
 def _keep_record(records: str | None, job: Job, record: dict | None) -> None:
-    if records and record:
-        job_records.save(record, job_records.record_dir(records, job.run_dir))
+    """Saves the job's ``record`` under ``records``, saying so when it replaces a record of the same job and stage
+    keys whose rows differ (the rows derived from the job's evaluations replace an edited record)."""
+    if not (records and record):
+        return
+    directory = job_records.record_dir(records, job.run_dir)
+    try:
+        old = job_records.read(directory) if (directory / job_records.RECORD).is_file() else None
+    except job_records.RecordError:
+        old = None
+    if old is not None and old["rows"] is not None and record["rows"] is not None and \
+            old["signature"] == record["signature"] and \
+            job_records.canonical(old["stages"]) == job_records.canonical(record["stages"]) and \
+            job_records.canonical(old["rows"]) != job_records.canonical(record["rows"]):
+        print(f"study: the record {directory / job_records.RECORD} differed from the evaluations in {job.run_dir}: "
+              "replaced by their rows", flush=True)
+    job_records.save(record, directory)
 
 
 def check_ray_address(address: str, timeout: float = 10.0) -> None:
@@ -395,10 +498,190 @@ def check_ray_address(address: str, timeout: float = 10.0) -> None:
                           "ray.address and RAY_ADDRESS unset for a local instance") from None
 
 
+# What a job on a cluster takes from the driver's environment (the rendering backend, the W&B mode): the rest of
+# its environment is the node's.
+FORWARDED_ENV = ("MUJOCO_GL", "PYOPENGL_PLATFORM", "WANDB_MODE")
+# What a cluster's copy of the project leaves out (besides what the project's .gitignore names, which Ray leaves
+# out too): run directories, the virtual environment, git's history.
+CLUSTER_EXCLUDES = ["outputs", ".venv", ".git", "__pycache__", "*.egg-info"]
+_SOCKET_ROOM = 66  # what Ray adds to its temporary folder for its sockets (session_<time>_<pid>/sockets/plasma_store)
+
+
+def project_root() -> Path:
+    """The project's folder (``hierloco/``, ``recipes/``): on a cluster, every job runs in a copy of it."""
+    import recipes
+
+    return Path(next(iter(recipes.__path__))).resolve().parent
+
+
+def cluster_runtime_env() -> dict:
+    """Ray's ``runtime_env`` of a study's jobs on a cluster: the project (:func:`project_root`, without
+    :data:`CLUSTER_EXCLUDES`) uploaded as their working directory, so every node runs this machine's code and a
+    job's relative run directory lies in that copy (it comes back, :func:`bring_back`); the variables of
+    :data:`FORWARDED_ENV` this process has."""
+    return {"working_dir": str(project_root()), "excludes": list(CLUSTER_EXCLUDES),
+            "env_vars": {name: os.environ[name] for name in FORWARDED_ENV if name in os.environ}}
+
+
+def _private_temp_dir() -> str:
+    """A new folder for a local Ray instance's files (sessions, sockets, logs): in the temporary folder
+    (``TMPDIR``), or ``/tmp`` where that path is too long for Ray's sockets (108 bytes on Linux)."""
+    root = tempfile.gettempdir()
+    if len(os.path.join(root, "hierloco-ray-xxxxxxxx")) + _SOCKET_ROOM > 107:
+        root = "/tmp"
+    return tempfile.mkdtemp(prefix="hierloco-ray-", dir=root)
+
+
+# Ray's logger that says, as every local instance starts, that it uses token authentication (Ray's default)
+_TOKEN_NOTICE = "ray._private.authentication.authentication_token_setup"
+
+
+@contextlib.contextmanager
+def _quiet(logger: str):
+    """Within the block, ``logger`` says only errors."""
+    import logging
+
+    log = logging.getLogger(logger)
+    level = log.level
+    log.setLevel(logging.ERROR)
+    try:
+        yield
+    finally:
+        log.setLevel(level)
+
+
+def _set_sigterm(handler) -> None:
+    if handler is not None:
+        with contextlib.suppress(ValueError):  # not the main thread: signals are the main thread's
+            signal.signal(signal.SIGTERM, handler)
+
+
+@contextlib.contextmanager
+def ray_session(address: str | None = None):
+    """Ray for a study, shut down when the block ends, however it ends (Ctrl-C and SIGTERM included, so the jobs
+    stop with it). With ``address`` (``host:port``, ``ray://host:port``): the cluster there, its jobs running in a
+    copy of the project (:func:`cluster_runtime_env`); a cluster that refuses this process (token authentication:
+    ``RAY_AUTH_MODE=token`` and the cluster's token) is a :class:`ConfigError` in one line. Without: a local
+    instance of this study's own (``address="local"``, in a private temporary folder removed at the end), whatever
+    other Ray clusters this machine runs or left their address behind (Ray's ``ray_current_cluster``). The
+    process's SIGTERM handler stays (``ray.init`` puts its own in, which ends the process without a word). A Ray
+    already initialised in this process (a notebook's, a test's) is used as it is and left running."""
+    import ray
+
+    if ray.is_initialized():
+        yield
+        return
+    handler = signal.getsignal(signal.SIGTERM)
+    temp_dir = None
+    # As this process joins Ray, Ray's core puts in a C++ handler for SIGTERM (a stack dump, then abort: exit 134),
+    # which a SIGTERM during ray.init would meet. Ray's switch for it is RAY_DISABLE_FAILURE_SIGNAL_HANDLER, read as
+    # Ray is imported; set here for this process alone (the Ray processes it starts keep their crash reports).
+    constants = ray._private.ray_constants
+    failure_handler = getattr(constants, "RAY_DISABLE_FAILURE_SIGNAL_HANDLER", False)
+    constants.RAY_DISABLE_FAILURE_SIGNAL_HANDLER = True
+    try:
+        try:
+            if address:
+                _connect(address)
+            else:  # its workers run at normal priority (Ray lowers it by default)
+                from hierloco.envs.batched_sim import available_cores
+
+                os.environ.setdefault("RAY_worker_niceness", "0")
+                temp_dir = _private_temp_dir()
+                with _quiet(_TOKEN_NOTICE):
+                    ray.init(address="local", num_cpus=available_cores(), include_dashboard=False,
+                             log_to_driver=False, configure_logging=False, _temp_dir=temp_dir)
+        except SystemExit as exit_:  # Ray's SIGTERM handler, while ray.init ran: what SIGTERM does in this process
+            if exit_.code == signal.SIGTERM and callable(handler):
+                handler(signal.SIGTERM, None)
+            raise
+        if callable(handler):
+            _set_sigterm(handler)
+        yield
+    finally:
+        if ray.is_initialized():
+            ray.shutdown()
+        constants.RAY_DISABLE_FAILURE_SIGNAL_HANDLER = failure_handler
+        _set_sigterm(handler)
+        if temp_dir is not None:
+            shutil.rmtree(temp_dir, ignore_errors=True)
+
+
+def _connect(address: str) -> None:
+    """Joins the cluster at ``address`` (see :func:`ray_session`). What Ray's core prints to the process's stderr
+    while it tries (one warning a second) is read, not shown: a refusal becomes one line."""
+    import ray
+
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as said:
+        os.dup2(said.fileno(), 2)
+        try:
+            ray.init(address=address, log_to_driver=False, configure_logging=False,
+                     runtime_env=cluster_runtime_env())
+            error = None
+        except (ConnectionError, RuntimeError, ray.exceptions.RayError) as raised:
+            error = raised
+        finally:
+            sys.stderr.flush()
+            os.dup2(saved, 2)
+            os.close(saved)
+        if error is None:
+            return
+        said.seek(0)
+        text = said.read().decode(errors="replace")
+    from hierloco.pipeline.errors import one_line
+
+    if "InvalidAuthToken" in text or isinstance(error, ray.exceptions.AuthenticationError):
+        raise ConfigError(f"the Ray cluster at {address} refused this process: it asks for a token (Ray's token "
+                          "authentication); set RAY_AUTH_MODE=token and the cluster's token (RAY_AUTH_TOKEN, or the "
+                          "file RAY_AUTH_TOKEN_PATH or ~/.ray/auth_token names) in this process's environment "
+                          "(docs/pipeline.md)") from None
+    raise ConfigError(f"cannot join the Ray cluster at {address}: {one_line(error)[:300]}") from None
+
+
+def bring_back(job: Job, outcome: dict) -> str | None:
+    """Writes here what a job on a cluster sent back (:func:`execute` with ``fetch_run_dir``): this run's part of
+    its log, appended to :func:`job_log` (unless that log already ends with it: storage shared with the node), and
+    its run directory, unpacked (tarfile's ``data`` filter: nothing outside the folder) into a new folder that then
+    takes the run directory's place when none is here or an empty one. A run directory that is here already is
+    left as it is: it is the node's own when storage is shared (its ``job.json`` or ``failed.json`` the same), else
+    the line returned says that the job's run directory was not brought back (its rows and record were)."""
+    log, text = job_log(job), outcome.get("log")
+    if text and not (log.is_file() and log.read_bytes().endswith(text)):
+        log.parent.mkdir(parents=True, exist_ok=True)
+        with open(log, "ab") as out:
+            out.write(text)
+    if not outcome.get("archive"):
+        return None
+    run_dir = Path(job.run_dir)
+    if run_dir.is_dir() and any(run_dir.iterdir()):
+        with tarfile.open(fileobj=io.BytesIO(outcome["archive"]), mode="r:gz") as archive:
+            for name in (DONE, job_records.FAILED):
+                member = next((m for m in archive.getmembers() if m.name == f"./{name}" and m.isfile()), None)
+                if member is not None and (run_dir / name).is_file() and \
+                        archive.extractfile(member).read() == (run_dir / name).read_bytes():
+                    return None
+        return (f"{run_dir} here holds another run: the run directory job {job.method} made on the cluster was not "
+                "brought back (its rows and record were); move it away and run the study again to fetch it")
+    run_dir.parent.mkdir(parents=True, exist_ok=True)
+    incoming = Path(tempfile.mkdtemp(prefix=f".{run_dir.name}.incoming-", dir=run_dir.parent))
+    try:
+        with tarfile.open(fileobj=io.BytesIO(outcome["archive"]), mode="r:gz") as archive:
+            archive.extractall(incoming, filter="data")
+        os.rename(incoming, run_dir)
+    except BaseException:
+        shutil.rmtree(incoming, ignore_errors=True)
+        raise
+    return None
+
+
 def machine_slots(cores_per_job: int, gpus_per_job: float = 0.0, *, cores: int | None = None,
                   gpus: int | None = None) -> tuple[int, str]:
     """How many jobs this machine runs at once (its cores over ``cores_per_job``, and its GPUs over ``gpus_per_job``
     when jobs ask for a share of one), and the machine in words."""
+    from hierloco.envs.batched_sim import available_cores
+
     cores = available_cores() if cores is None else int(cores)
     if gpus is None:
         import torch
@@ -516,10 +799,10 @@ def run_jobs(jobs: Sequence[Job], *, address: str | None = None, cores_per_job: 
     with ``0`` they run on the CPU (the keys of CPU runs and records).
     With ``records`` (a directory), every finished job leaves its record there and a job missing from its run
     directory is taken from its current record (``hierloco/pipeline/records.py``). With ``dry_run``, prints the plan
-    (:func:`plan_text`) and ends the study (``SystemExit(0)``) without running or writing anything."""
-    import ray
-
-    check_records(records)
+    (:func:`plan_text`) and ends the study (``SystemExit(0)``) without running or writing anything. Ray is started
+    or joined by :func:`ray_session`; on a cluster (``address``) every job's run directory and log come back here
+    (:func:`bring_back`), as they do everywhere with ``fetch_run_dirs``."""
+    check_records(records, jobs)
     for root in dict.fromkeys(job.records_from for job in jobs if job.records_from):
         check_records(root)
     gpus_per_job = check_gpus_per_job(gpus_per_job, jobs)
@@ -576,66 +859,58 @@ def run_jobs(jobs: Sequence[Job], *, address: str | None = None, cores_per_job: 
             + "".join(f", {n} from the records in {root}" for root, n in borrowed.items()))
     print(line + (f", {findings} not evaluable (an earlier run's finding)" if findings else ""), flush=True)
     if todo:
-        started_here = not ray.is_initialized()
-        if started_here:
-            if address:
-                ray.init(address=address, log_to_driver=False,
-                         runtime_env={"working_dir": str(RECIPES.parent), "excludes": ["outputs", ".venv", ".git"]})
-            else:  # a local instance; its workers run at normal priority (Ray lowers it by default)
-                os.environ.setdefault("RAY_worker_niceness", "0")
-                ray.init(num_cpus=available_cores(), include_dashboard=False, log_to_driver=False,
-                         configure_logging=False)
-        remote = ray.remote(execute)
-        waiting = _waiting(jobs, todo)  # job -> the job of this study it starts from, which must end first
-        pending: dict = {}
+        import ray
 
-        def submit(indices) -> None:
-            pending.update({remote.options(num_cpus=jobs[i].cores, num_gpus=gpus_per_job).remote(
-                jobs[i], fetch_run_dirs): i for i in indices})
+        fetch = fetch_run_dirs or bool(address)  # a cluster's nodes need not share this machine's file system
+        with ray_session(address):
+            remote = ray.remote(execute)
+            waiting = _waiting(jobs, todo)  # job -> the job of this study it starts from, which must end first
+            pending: dict = {}
 
-        submit(i for i in todo if i not in waiting)
-        slots = max(1, int(ray.cluster_resources().get("CPU", 1)) // max(1, jobs[todo[0]].cores))
-        if gpus_per_job > 0:
-            slots = max(1, min(slots, int(ray.cluster_resources().get("GPU", 0) / gpus_per_job + 1e-9)))
-        start, last, durations = time.perf_counter(), 0.0, []
-        finished_at = start
-        while pending or waiting:
-            if not pending:  # what is left waits on itself (jobs that name each other): run it as it is
-                submit(list(waiting))
-                waiting.clear()
-            ready, _ = ray.wait(list(pending), num_returns=1, timeout=progress_every)
-            for ref in ready:
-                index = pending.pop(ref)
-                job = jobs[index]
-                try:
-                    outcome = ray.get(ref)
-                except Exception as error:  # the worker died
-                    outcome = {"ok": False, "rows": [], "seconds": 0.0, "error": str(error), "archive": None,
-                               "finding": False}
-                if outcome.get("archive") and not Path(job.run_dir).exists():
-                    with tarfile.open(fileobj=io.BytesIO(outcome["archive"]), mode="r:gz") as archive:
-                        archive.extractall(job.run_dir, filter="data")
-                results[index] = JobResult(job, outcome["ok"], outcome["rows"], outcome["seconds"],
-                                           error=outcome["error"], finding=outcome["finding"],
-                                           report=outcome.get("report") or {}, builds=outcome.get("builds") or {})
-                _keep_record(records, job, outcome.get("record"))
-                durations.append(outcome["seconds"])
-                finished_at = time.perf_counter()
-                if not outcome["ok"]:
-                    said = "is not evaluable" if outcome["finding"] else "failed"
-                    print(f"study: job {job.method} {job.run_dir} {said}: {outcome['error']}", flush=True)
-                released = [i for i, after in waiting.items() if after == index]
-                for i in released:
-                    del waiting[i]
-                submit(released)
-            if time.perf_counter() - last >= progress_every or not (pending or waiting):
-                failed = sum(not r.ok for r in results.values())
-                running = min(len(pending), slots)
-                print(_progress(len(results) - failed, running, failed, len(pending) + len(waiting) - running, start,
-                                durations, slots, finished_at), flush=True)
-                last = time.perf_counter()
-        if started_here:
-            ray.shutdown()
+            def submit(indices) -> None:
+                pending.update({remote.options(num_cpus=jobs[i].cores, num_gpus=gpus_per_job).remote(
+                    jobs[i], fetch): i for i in indices})
+
+            submit(i for i in todo if i not in waiting)
+            slots = max(1, int(ray.cluster_resources().get("CPU", 1)) // max(1, jobs[todo[0]].cores))
+            if gpus_per_job > 0:
+                slots = max(1, min(slots, int(ray.cluster_resources().get("GPU", 0) / gpus_per_job + 1e-9)))
+            start, last, durations = time.perf_counter(), 0.0, []
+            finished_at = start
+            while pending or waiting:
+                if not pending:  # what is left waits on itself (jobs that name each other): run it as it is
+                    submit(list(waiting))
+                    waiting.clear()
+                ready, _ = ray.wait(list(pending), num_returns=1, timeout=progress_every)
+                for ref in ready:
+                    index = pending.pop(ref)
+                    job = jobs[index]
+                    try:
+                        outcome = ray.get(ref)
+                    except Exception as error:  # the worker died
+                        outcome = {"ok": False, "rows": [], "seconds": 0.0, "error": str(error), "archive": None,
+                                   "finding": False}
+                    if fetch and (said := bring_back(job, outcome)):
+                        print(f"study: {said}", flush=True)
+                    results[index] = JobResult(job, outcome["ok"], outcome["rows"], outcome["seconds"],
+                                               error=outcome["error"], finding=outcome["finding"],
+                                               report=outcome.get("report") or {}, builds=outcome.get("builds") or {})
+                    _keep_record(records, job, outcome.get("record"))
+                    durations.append(outcome["seconds"])
+                    finished_at = time.perf_counter()
+                    if not outcome["ok"]:
+                        said = "is not evaluable" if outcome["finding"] else "failed"
+                        print(f"study: job {job.method} {job.run_dir} {said}: {outcome['error']}", flush=True)
+                    released = [i for i, after in waiting.items() if after == index]
+                    for i in released:
+                        del waiting[i]
+                    submit(released)
+                if time.perf_counter() - last >= progress_every or not (pending or waiting):
+                    failed = sum(not r.ok for r in results.values())
+                    running = min(len(pending), slots)
+                    print(_progress(len(results) - failed, running, failed, len(pending) + len(waiting) - running,
+                                    start, durations, slots, finished_at), flush=True)
+                    last = time.perf_counter()
     return [results[i] for i in range(len(jobs))]
 
 
@@ -691,6 +966,7 @@ def run_here(job: Job) -> list[dict]:
     return outcome["rows"]
 
 
-__all__ = ["DONE", "Job", "JobResult", "check_gpus_per_job", "check_ray_address", "check_records", "evaluation_rows",
-           "execute", "finished", "machine_slots", "plan_text", "planned_stages", "recorded", "report_failures",
-           "resolve_method", "rows_of", "run_here", "run_jobs"]
+__all__ = ["CLUSTER_EXCLUDES", "DONE", "FORWARDED_ENV", "Job", "JobResult", "bring_back", "check_gpus_per_job",
+           "check_ray_address", "check_records", "cluster_runtime_env", "evaluation_rows", "execute", "finished",
+           "job_log", "machine_slots", "pack", "plan_text", "planned_stages", "project_root", "ray_session", "recorded",
+           "report_failures", "resolve_method", "rows_of", "run_here", "run_jobs"]

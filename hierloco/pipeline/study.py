@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 from hierloco.pipeline.errors import EXIT_INTERRUPTED, EXIT_USER_ERROR, ConfigError
-from hierloco.pipeline.studies import Job, JobResult, report_failures, rows_of, run_jobs
+from hierloco.pipeline.studies import Job, JobResult, check_ray_address, report_failures, rows_of, run_jobs
 
 PAPER_TASKS = ("velocity_tracking", "goal_reaching", "trajectory_tracking")
 
@@ -45,6 +45,8 @@ def study_main(script_file: str, config_name: str = "config") -> Callable:
         def task(cfg):
             with one_line_errors():
                 check_environment()
+                if (address := ray_address(cfg)) and not cfg.get("dry_run", False):
+                    check_ray_address(address)  # before the study's own work: a cluster that is not there
                 return main(cfg)
 
         @functools.wraps(main)
@@ -88,11 +90,17 @@ def seed_problems(seeds) -> list[str]:
         [] if list(seeds) else ["seeds is empty"])
 
 
+def ray_address(cfg) -> str | None:
+    """The Ray cluster a study's jobs run on: ``ray.address``, else ``RAY_ADDRESS``; ``None``: a local instance of
+    the study's own (:func:`hierloco.pipeline.studies.ray_session`)."""
+    return (cfg.get("ray") or {}).get("address") or os.environ.get("RAY_ADDRESS") or None
+
+
 def run_study(cfg, jobs: Sequence[Job]) -> list[JobResult]:
-    """Runs ``jobs`` with the study config's Ray options (``ray.address``, ``ray.cores_per_job``,
+    """Runs ``jobs`` with the study config's Ray options (``ray.address`` or ``RAY_ADDRESS``, ``ray.cores_per_job``,
     ``ray.gpus_per_job``, ``ray.fetch_run_dirs``), ``records`` and ``dry_run``."""
     ray = cfg.get("ray") or {}
-    return run_jobs(jobs, address=ray.get("address"), cores_per_job=ray.get("cores_per_job"),
+    return run_jobs(jobs, address=ray_address(cfg), cores_per_job=ray.get("cores_per_job"),
                     gpus_per_job=ray.get("gpus_per_job", 0),
                     fetch_run_dirs=bool(ray.get("fetch_run_dirs", False)), records=cfg.get("records"),
                     dry_run=bool(cfg.get("dry_run", False)))
@@ -155,4 +163,4 @@ def end_study(results: Sequence[JobResult]) -> None:
 
 
 __all__ = ["PAPER_TASKS", "ConfigError", "EXIT_INTERRUPTED", "end_study", "main_tasks", "missing_markdown",
-           "rows_of", "run_study", "seed_problems", "study_main", "study_robots", "write_tables"]
+           "ray_address", "rows_of", "run_study", "seed_problems", "study_main", "study_robots", "write_tables"]

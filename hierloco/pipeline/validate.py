@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 
-from hierloco.io import ArtifactError
+from hierloco.io import ArtifactError, brief
 
 
 def _finite_array(name: str, value, where) -> None:
@@ -67,12 +67,28 @@ def check_gait_policy(trained, where) -> None:
         _finite_array(name, getattr(trained, name).detach().cpu().numpy(), where)
 
 
-def check_transitions(data, params: dict, where) -> None:
+def check_transitions(data, params: dict, where, low_level: dict | None = None) -> None:
+    """Transitions of the stage's size whose actions are those of the low level they were collected on: one column
+    per dimension of the action box their metadata records (``low_level``: the low level's description), of the
+    kind the stage's key names (``low_level``: the key's ``low_level`` entry, e.g. ``{"kind": "latent", ...}``).
+    A dynamics model fitted to actions of another width would only fail later, at the first plan."""
     count = len(data.com_state)
     _shape("com_state", data.com_state, (count, 5), where)
     _shape("next_com_state", data.next_com_state, (count, 5), where)
     if np.ndim(data.action) != 2 or len(data.action) != count:
         raise ArtifactError(f"{where}: action has shape {np.shape(data.action)}, expected {count} x A")
+    described = data.metadata.get("low_level")
+    box = [described.get(end) for end in ("action_low", "action_high")] if isinstance(described, dict) else None
+    if box is None or not all(isinstance(end, list) and end for end in box) or len(box[0]) != len(box[1]):
+        raise ArtifactError(f"{where}: its metadata does not describe the low level it was collected on (low_level "
+                            "with its action box action_low, action_high)")
+    kind = described.get("kind")
+    wanted = low_level.get("kind") if isinstance(low_level, dict) else None
+    if wanted is not None and kind != wanted:
+        raise ArtifactError(f"{where}: collected on a {brief(kind)} low level, the stage asks for a {wanted!r} one")
+    if np.shape(data.action)[1] != len(box[0]):
+        raise ArtifactError(f"{where}: action has {np.shape(data.action)[1]} column(s), but the {brief(kind)} low "
+                            f"level it was collected on has {len(box[0])} action dimension(s) (its action box)")
     wanted = params.get("num_transitions")
     if wanted is not None and count != wanted:
         raise ArtifactError(f"{where}: {count} transitions, the stage asks for {wanted}")
@@ -118,11 +134,14 @@ def validate(stage, artifact, robot, where) -> None:
     elif isinstance(artifact, TrainedGaitPolicy):
         check_gait_policy(artifact, where)
     elif isinstance(artifact, TransitionData):
-        check_transitions(artifact, stage.params, where)
+        check_transitions(artifact, stage.params, where, (stage.after or {}).get("low_level"))
     elif isinstance(artifact, TrainedCoMModel):
         check_com_model(artifact, where)
     elif isinstance(artifact, TaskEvaluation):
+        from hierloco.pipeline.report import checked_rows
+
         check_evaluation(artifact, where)
+        checked_rows(artifact, stage.params, where)  # rows against their recording and their stage's labels
     elif type(artifact).__name__ == "SACAgent":
         check_sac_agent(artifact, where)
 

@@ -24,10 +24,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from hierloco import stats
 from hierloco.envs.tasks import GoalReaching
+from hierloco.io import ArtifactError, load_yaml
 
 LEARNED = ("lib", "sac", "sac_sac")   # the learned baselines LAT is claimed to beat on every task
 MODEL_FREE = ("sac", "sac_sac")       # trained on half of the targets, claimed not to generalise to the others
@@ -288,9 +288,9 @@ def load_causes(path, claims: tuple[str, ...] = CLAIMS) -> list[Cause]:
     if not path.is_file():
         raise ValueError(f"causes: no file {str(path)!r}")
     try:
-        entries = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as error:
-        raise ValueError(f"causes: {path} is not YAML: {error}") from None
+        entries = load_yaml(path)  # read safely: a shared causes file holds no YAML bomb
+    except ArtifactError as error:
+        raise ValueError(f"causes: {error}") from None
     if not isinstance(entries, list):
         raise ValueError(f"causes: {path} must hold a list of entries, got {type(entries).__name__}")
     causes, problems = [], []

@@ -162,3 +162,72 @@ def test_begin_task_retargets_the_world_model_and_forgets_the_warm_start(name):
     action = planner(start(env, [[0.0, 0.0]] * 3))["action"]
     expected = torch.tensor(mirrored).clamp(-HALF_WIDTH, HALF_WIDTH)  # straight at the new goals, clipped
     torch.testing.assert_close(action, expected, atol=0.05, rtol=0)
+
+
+class CommandDrift(torch.nn.Module):
+    """A test double for the CoM model over velocity commands ``(vx, vy, yaw_rate)``: the robot moves by ``(vx, vy)``
+    in the world frame over the 1 s action and ends with that velocity."""
+
+    def predict(self, com_state, action):
+        return torch.cat([com_state[..., :2] + action[..., :2], com_state[..., 2:3], action[..., :2]], -1)
+
+
+def bare_env_planner(task, num_robots):
+    """A bare latent-action env (A1 under the Raibert controller, no transform at all) and a random-shooting planner
+    over :class:`CommandDrift` for ``task``."""
+    from hierloco.components.low_level import CommandLowLevel
+    from hierloco.envs.latent_env import LatentActionEnv
+
+    low_level = CommandLowLevel("a1", num_robots)
+    world_model = CoMWorldModelEnv(CommandDrift(), action_low=low_level.action_low, action_high=low_level.action_high,
+                                   task=task)
+    env = LatentActionEnv(low_level, num_robots=num_robots, seed=0)
+    return env, RandomShootingPlanner(world_model, num_candidates=4000, seed=0)
+
+
+def collect(env, planner, frames, **options):
+    import warnings
+
+    from torchrl.collectors import Collector
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        collector = Collector(env, planner, frames_per_batch=frames, total_frames=frames, **options)
+        try:
+            batch = next(iter(collector))
+        finally:
+            collector.shutdown()
+    assert not [w for w in caught if "missing transforms" in str(w.message)], "the env lacks nothing the planner reads"
+    return batch
+
+
+def test_a_planner_runs_in_a_collector_over_the_bare_latent_env():
+    """No task transform, no InitTracker: robot b pursues episode b of the planner's task (goal b), as
+    ``task_transforms`` would have it; the env's tensordicts are left without task keys. Under the test model the
+    best command from a measured position p is the nearest point of the command box to ``goal - p``."""
+    goals = torch.tensor([[2.0, 0.0], [-2.0, 0.0]])
+    env, planner = bare_env_planner(GoalReaching(goals=goals.tolist()), num_robots=2)
+    batch = collect(env, planner, frames=6)
+    assert batch.batch_size == (2, 3) and "task_episode" not in batch.keys()
+    action = batch["action"]
+    assert all(env.action_spec.is_in(action[:, t]) for t in range(3))
+    to_goal = goals[:, None] - batch["com_state"][..., :2]
+    best = to_goal.clamp(-HALF_WIDTH, HALF_WIDTH)
+    gap = 2 * (to_goal - action[..., :2]).norm(dim=-1) - 2 * (to_goal - best).norm(dim=-1)  # goal reaching cost
+    assert torch.all(gap <= 2 * 2 * resolution(4000, 1, action_dim=3)), gap
+    assert (action[0, :, 0] > 0.25).all() and (action[1, :, 0] < -0.25).all()  # each robot towards its own goal
+
+
+def test_a_planner_counts_the_task_steps_of_a_bare_env_across_resets():
+    """Velocity tracking with a new target at every step: the planner's own step count follows each robot's episode,
+    back to 0 when the collector resets the robot (episodes of 2 actions), so it commands the target of that step."""
+    from hierloco.envs.tasks import VelocityTracking
+
+    targets = torch.tensor([[0.2, 0.0], [0.0, 0.2], [-0.2, -0.1]])
+    env, planner = bare_env_planner(VelocityTracking(velocities=targets.tolist(), steps_per_target=1, rounds=1),
+                                    num_robots=2)
+    batch = collect(env, planner, frames=10, max_frames_per_traj=2)
+    assert batch["step_count"].squeeze(-1).tolist() == [[0, 1, 0, 1, 0]] * 2
+    torch.testing.assert_close(batch["is_init"].squeeze(-1), batch["step_count"].squeeze(-1) == 0)
+    expected = targets[batch["step_count"].squeeze(-1)]  # without the resets, the third action would chase target 2
+    torch.testing.assert_close(batch["action"][..., :2], expected, atol=0.03, rtol=0)

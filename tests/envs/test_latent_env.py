@@ -1,5 +1,7 @@
 """The latent-action environment: TorchRL contracts, seeding, falls, collectors, with every kind of low level."""
 
+import warnings
+
 import numpy as np
 import pytest
 import torch
@@ -106,3 +108,44 @@ def test_bad_actions_are_refused(library):
     td["action"] = torch.tensor([[0], [99]])
     with pytest.raises(ValueError, match="expert indices"):
         env.step(td)
+
+
+def test_is_init_marks_each_robots_episode_start_in_a_collector(library):
+    """The env writes TorchRL's ``is_init`` itself: true at a robot's reset (only the robots reset), false after a
+    step; a collector over the bare env sees it at every episode start and finds no transform missing."""
+    env = LatentActionEnv(ExpertReplayLowLevel(library), num_robots=2, seed=0)
+    td = env.reset()
+    assert td["is_init"].squeeze(-1).tolist() == [True, True]
+    td = env.step(td.set("action", torch.tensor([[0], [1]])))["next"]
+    assert td["is_init"].squeeze(-1).tolist() == [False, False]
+    td = env.reset(td.set("_reset", torch.tensor([[False], [True]])))
+    assert td["is_init"].squeeze(-1).tolist() == [False, True]
+
+    limited = TransformedEnv(env, StepCounter(max_steps=2))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        collector = Collector(limited, UniformActionPolicy(limited.action_spec, seed=0), frames_per_batch=10,
+                              total_frames=10)
+        batch = next(iter(collector))
+        collector.shutdown()
+    assert not [w for w in caught if "missing transforms" in str(w.message)]
+    assert batch["step_count"].squeeze(-1).tolist() == [[0, 1, 0, 1, 0]] * 2
+    torch.testing.assert_close(batch["is_init"], batch["step_count"] == 0)
+
+
+def test_one_robot_keeps_its_batch_dimension(library):
+    """The batch is ``[B]`` for every B, 1 included (the conventions of ``hierloco.envs``); recorded foot contacts
+    are bool."""
+    env = LatentActionEnv(ExpertReplayLowLevel(library), num_robots=1, record=True, seed=0)
+    check_env_specs(env)
+    td = env.rollout(2, policy=UniformActionPolicy(env.action_spec, seed=0))
+    assert env.batch_size == (1,) and td.batch_size == (1, 2)
+    assert td["next", "com_state"].shape == (1, 2, 5) and td["next", "done"].shape == (1, 2, 1)
+    assert td["action"].shape == (1, 2, 1) and td["next", "foot_contacts"].shape == (1, 2, 100, 4)
+    assert td["next", "foot_contacts"].dtype == torch.bool and env.observation_spec["foot_contacts"].dtype == torch.bool
+
+
+@pytest.mark.parametrize("num_robots", [0, -2, 1.5, True, "2", float("nan")])
+def test_a_bad_number_of_robots_is_refused(library, num_robots):
+    with pytest.raises(ValueError, match="num_robots must be a whole number >= 1"):
+        LatentActionEnv(ExpertReplayLowLevel(library), num_robots=num_robots)

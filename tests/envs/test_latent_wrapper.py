@@ -89,5 +89,29 @@ def test_make_env_flat_observation_is_the_documented_concatenation():
                                 "joint_velocities", "foot_contacts")
     assert td["observation"].shape == (3, 9 + 2 * robot.num_joints + len(robot.legs))
     for root in (td, td["next"]):
-        torch.testing.assert_close(root["observation"], torch.cat([root[key] for key in OBSERVATION_KEYS], -1))
+        parts = [root[key].float() for key in OBSERVATION_KEYS]  # foot contacts: bool under their own key
+        torch.testing.assert_close(root["observation"], torch.cat(parts, -1))
     assert env.observation_spec["observation"].shape == (37,)
+
+
+def test_foot_contacts_are_bool_under_their_own_key_and_0_1_in_the_flat_observation(low_level):
+    """The dtype convention of ``hierloco.envs``, in ``make_env`` and in the latent layer over it, as in the batched
+    simulator's ``LatentActionEnv(record=True)``; the flat observation stays float32."""
+    for env in (make_env("a1", seed=0), LatentActionWrapper(make_env(ROBOT, seed=0), low_level)):
+        check_env_specs(env)
+        assert env.observation_spec["foot_contacts"].dtype == torch.bool
+        td = env.rollout(2)["next"]
+        contacts = td["foot_contacts"]
+        assert contacts.dtype == torch.bool and td["observation"].dtype == torch.float32
+        assert torch.equal(td["observation"][..., -contacts.shape[-1]:], contacts.float())
+        assert contacts[-1].any(), "a standing robot has feet on the ground"
+
+
+def test_a_low_level_that_does_not_fit_is_refused_at_construction(low_level):
+    """The action spec is checked when the layer is built, in one ValueError, before any step: a low level of
+    another robot (Daisy's 18 joints over A1's 12), or a latent box of another size than the low level's latent."""
+    with pytest.raises(ValueError, match=r"writes 'action' of shape \(18,\), the wrapped env's action spec has "
+                                         r"shape \(12,\)"):
+        LatentActionWrapper(make_env("a1", seed=0), low_level)
+    with pytest.raises(ValueError, match="the low level fails on a latent of the box's size 3"):
+        LatentActionWrapper(make_env(ROBOT, seed=0), low_level, action_low=[-1.0] * 3, action_high=[1.0] * 3)

@@ -5,6 +5,8 @@ import math
 import pytest
 import torch
 from tensordict import TensorDict
+from tensordict.nn import TensorDictModule
+from torchrl.collectors import Collector
 from torchrl.data import Bounded, Categorical
 from torchrl.envs.utils import check_env_specs
 
@@ -186,3 +188,31 @@ def test_reset_defaults():
 def test_bad_action_space(kwargs):
     with pytest.raises(ValueError):
         CoMWorldModelEnv(Shift(), task=GoalReaching(), **kwargs)
+
+
+def test_the_task_end_sets_done_and_terminated_and_the_rewards_stay():
+    """A step that ends the task's last step (task_step reaching num_steps) is terminal; a TorchRL collector cuts the
+    imagined episodes there and starts over; every reward is the one the same steps give without an end in sight."""
+    task, endless = GoalReaching(goals=GOALS, num_steps=3), GoalReaching(goals=GOALS, num_steps=1000)
+    env = shift_env(task)
+    check_env_specs(env)
+    policy = TensorDictModule(lambda state: torch.tensor([0.3, 0.2, 0.1]).expand(*state.shape[:-1], 3),
+                              in_keys=["com_state"], out_keys=["action"])
+    collector = Collector(env, policy, frames_per_batch=7, total_frames=7, auto_register_policy_transforms=False)
+    batch = next(iter(collector))
+    collector.shutdown()
+    assert batch["next", "task_step"].squeeze(-1).tolist() == [1, 2, 3, 1, 2, 3, 1]
+    ended = [False, False, True] * 2 + [False]
+    assert batch["next", "terminated"].squeeze(-1).tolist() == ended
+    assert batch["next", "done"].squeeze(-1).tolist() == ended and not batch["next", "truncated"].any()
+    state = batch.select("com_state", "task_episode", "task_step", "action")
+    torch.testing.assert_close(shift_env(endless).step(state)["next", "reward"], batch["next", "reward"])
+    past_the_end = env.step(env.initial_state(episode=torch.tensor([0]), step=5).set("action", torch.zeros(1, 3)))
+    assert past_the_end["next", "done"].item()
+    assert past_the_end["next", "reward"].item() == pytest.approx(-2 * 2.0)  # still the task's cost
+
+
+def test_without_a_task_the_world_model_never_ends():
+    env = CoMWorldModelEnv(Shift(), action_low=[-1.0] * 3, action_high=[1.0] * 3)
+    td = env.step(env.initial_state(step=10**6).set("action", torch.zeros(3)))
+    assert not td["next", "done"].item() and not td["next", "terminated"].item()

@@ -17,6 +17,14 @@ present, ``is_init`` (TorchRL's :class:`~torchrl.envs.transforms.InitTracker`: t
 episode), ``_reset``, the task step counter ``task_step`` (a row whose counter went back has started a new episode)
 and ``task_episode`` (a row pursuing another target set); a row flagged by any of them starts cold, the others keep
 their warm start. So a robot reset by a collector never inherits its previous episode's plan, nor another robot's.
+
+A state without the task keys (from an env that runs no task: a bare
+:class:`~hierloco.envs.latent_env.LatentActionEnv` in a TorchRL ``Collector``, with no transform) is planned as the
+task state that :func:`hierloco.envs.transforms.task_transforms` would have written: row ``b`` pursues episode
+``b % num_episodes`` of the world model's task (:func:`hierloco.envs.world_model.default_episodes`), at the task step
+the planner counts itself, its plans for that row since the row's episode started (``is_init``, which
+:class:`~hierloco.envs.latent_env.LatentActionEnv` writes at a reset, ``_reset``, or :meth:`BoxPlannerBase.reset`).
+Keys the state holds are read as they are.
 """
 
 from __future__ import annotations
@@ -28,6 +36,7 @@ from torchrl.modules.planners import MPCPlannerBase
 
 from hierloco.components.policies import TaskPolicy
 from hierloco.devices import check_precision, compile_mode, precision_context
+from hierloco.envs.world_model import default_episodes
 from hierloco.registry import Registry
 
 # The planners by name (``planner.name``): a new planner is one subclass of :class:`BoxPlannerBase` decorated with
@@ -40,8 +49,9 @@ class BoxPlannerBase(MPCPlannerBase, TaskPolicy):
     """MPC over a box (or finite set) of actions with a learned world model.
 
     A TensorDict module: it reads the world model's state keys (``in_keys``: ``com_state`` ``B x 5``,
-    ``task_episode`` and ``task_step`` ``B x 1`` for :class:`~hierloco.envs.world_model.CoMWorldModelEnv`) and writes
-    ``action`` (``B x A``); ``B`` may be absent (one state).
+    ``task_episode`` and ``task_step`` ``B x 1`` for :class:`~hierloco.envs.world_model.CoMWorldModelEnv`; the task
+    keys made by the planner when a state lacks them, see the module doc) and writes ``action`` (``B x A``); ``B`` may
+    be absent (one state).
 
     Args:
         env: a world model env, e.g. :class:`hierloco.envs.world_model.CoMWorldModelEnv` (to plan a task with
@@ -120,6 +130,7 @@ class BoxPlannerBase(MPCPlannerBase, TaskPolicy):
         here = tensordict
         if source != device:  # the measured state, once, to the planner's device
             here = tensordict.select(*self.in_keys, self.init_key, "_reset", strict=False).to(device)
+        here = self._with_task_state(here)
         td = self._flat(here)
         self._keep = self.continuing_rows(td)
         self.warm_rows = torch.zeros_like(self._keep)  # planners without warm starts leave it so
@@ -142,17 +153,44 @@ class BoxPlannerBase(MPCPlannerBase, TaskPolicy):
         device = self.low.device
         if self._previous is None or self._previous.shape[0] != batch:
             return torch.zeros(batch, dtype=torch.bool, device=device)
-        keep = torch.ones(batch, dtype=torch.bool, device=device)
+        keep = ~self._flagged_rows(tensordict)
         keys = tensordict.keys()
-        for flag in (self.init_key, "_reset"):
-            if flag in keys:
-                keep &= ~tensordict.get(flag).reshape(batch, -1).any(-1).to(device)
         for key, started_over in ((self.step_key, torch.lt), (self.episode_key, torch.ne)):
             previous = self._marks.get(key)
             if key in keys and previous is not None:
                 now = tensordict.get(key).reshape(batch, -1)[:, 0]
                 keep &= ~started_over(now, previous).to(device)
         return keep
+
+    def _flagged_rows(self, tensordict: TensorDictBase) -> torch.Tensor:
+        """``B`` bool: the rows of a ``B``-batch whose ``is_init`` or ``_reset`` is set."""
+        batch = tensordict.batch_size[0]
+        flagged = torch.zeros(batch, dtype=torch.bool, device=self.low.device)
+        for flag in (self.init_key, "_reset"):
+            if flag in tensordict.keys():
+                flagged |= tensordict.get(flag).reshape(batch, -1).any(-1).to(flagged.device)
+        return flagged
+
+    def _with_task_state(self, tensordict: TensorDictBase) -> TensorDictBase:
+        """``tensordict`` with the task keys it lacks (see the module doc), in a shallow copy: the caller's is not
+        written."""
+        missing = [key for key in (self.episode_key, self.step_key) if key not in tensordict.keys()]
+        if not missing:
+            return tensordict
+        flat = self._flat(tensordict)
+        rows, device = flat.batch_size[0], self.low.device
+        shape = (*tensordict.batch_size, 1)
+        out = tensordict.copy()
+        if self.episode_key in missing:
+            out.set(self.episode_key, default_episodes(getattr(self.env, "task", None), rows, device).reshape(shape))
+        if self.step_key in missing:
+            previous = self._marks.get(self.step_key)
+            if previous is None or previous.shape[0] != rows:
+                steps = torch.zeros(rows, dtype=torch.int64, device=device)
+            else:
+                steps = torch.where(self._flagged_rows(flat), 0, previous.to(device) + 1)
+            out.set(self.step_key, steps.reshape(shape))
+        return out
 
     def begin_task(self, task) -> None:
         """Scores plans with ``task``'s cost from now on (the world model's ``set_task``) and forgets the previous

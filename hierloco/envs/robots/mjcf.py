@@ -26,10 +26,12 @@ from hierloco.envs.robots.spec import (
     PYTHON_SOURCE,
     Leg,
     RobotSpec,
+    actuation_problem,
     check_leg_count,
     is_number,
     missing_name_message,
 )
+from hierloco.io import brief
 
 MJCF_SOURCE_PREFIX = "mjcf:"
 
@@ -92,7 +94,8 @@ def robot_from_mjcf(
     """A :class:`RobotSpec` for the robot in ``xml`` (a file path or the MJCF text itself).
 
     The file may drive its joints with torque ``motor`` actuators (give ``kp``: they become position servos with
-    that gain and the motors' torque range) and may lack a free joint and a floor (both are added). Per-joint
+    that gain and the motors' torque range), or have no actuators at all (give ``kp`` and ``torque_limit``: a
+    servo is never left without a torque limit), and may lack a free joint and a floor (both are added). Per-joint
     values (``standing_pose``, ``kp``, ``torque_limit``, ``joint_damping``) are given in leg order as one value
     per joint, as one leg's values (used for every leg, when all legs have that many joints), as a single
     number (``kp``, ``torque_limit``, ``joint_damping``), or as a mapping leg name -> that leg's values.
@@ -113,8 +116,9 @@ def robot_from_mjcf(
         rear_legs: legs disabled in the adverse setting (default: the last two legs).
         swing_height: foot lift in m (default: derived from the hips' height,
             :func:`hierloco.envs.robots.derive_swing_height`). max_roll, max_pitch: fall thresholds in rad.
-        kp: position gain in N m / rad; required when the file drives its joints with torque motors.
-        torque_limit: N m (default: the file's motor range). joint_damping: N m s / rad (default: the file's).
+        kp: position gain in N m / rad; required when the file drives a joint with a torque motor or with nothing.
+        torque_limit: N m (default: the file's motor range); required when the file gives a joint none.
+        joint_damping: N m s / rad (default: the file's).
         description: a line for reports. source: where the description came from (default: the file's path).
 
     Raises:
@@ -148,7 +152,8 @@ def robot_from_mjcf(
         raise ValueError(f"{where}: feet {sorted(feet)} must name exactly the legs {sorted(legs)}")
     for leg, leg_joints in legs.items():
         if isinstance(leg_joints, str) or not leg_joints:
-            raise ValueError(f"{where}: legs[{leg!r}] must be a non-empty list of joint names, got {leg_joints!r}")
+            raise ValueError(f"{where}: legs[{leg!r}] must be a non-empty list of joint names, "
+                             f"got {brief(leg_joints)}")
         for joint in leg_joints:
             if joint not in joints:
                 raise ValueError(f"{where}: legs[{leg!r}]: {missing_name_message('joint', joint, joints)}")
@@ -170,6 +175,11 @@ def robot_from_mjcf(
         ("joint_damping", joint_damping))}
     if per_joint["standing_pose"] is None:
         raise ValueError(f"{where}: standing_pose is required")
+    problem = actuation_problem(probe, [j for leg in legs_tuple for j in leg.joints],
+                                kp_given=per_joint["kp"] is not None,
+                                torque_limit_given=per_joint["torque_limit"] is not None)
+    if problem is not None:  # now, not at the first simulation: a servo needs a gain and a torque limit
+        raise ValueError(f"{where}: {problem}")
     return RobotSpec(
         name=name,
         build_spec=_MjcfBuilder(text, base_dir, foot_bodies),
@@ -218,12 +228,12 @@ def _per_joint(where: str, key: str, value, legs: tuple[Leg, ...]) -> tuple[floa
             if len(values) != total and len(per_leg) == 1 and len(values) == len(legs[0].joints):
                 values = values * len(legs)
     except TypeError:
-        raise ValueError(f"{where}: {key} must be {forms} or a mapping leg -> values, got {value!r}") from None
+        raise ValueError(f"{where}: {key} must be {forms} or a mapping leg -> values, got {brief(value)}") from None
     if len(values) != total:
         raise ValueError(f"{where}: {key} has {len(values)} values for {total} joints; give {forms}")
     for joint, v in zip((j for leg in legs for j in leg.joints), values):
         if not is_number(v):
-            raise ValueError(f"{where}: {key} of joint {joint!r} must be a number, got {v!r}")
+            raise ValueError(f"{where}: {key} of joint {joint!r} must be a number, got {brief(v)}")
     return tuple(float(v) for v in values)
 
 

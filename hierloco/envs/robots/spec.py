@@ -44,6 +44,8 @@ from typing import Callable, Iterable, Sequence
 import mujoco
 import numpy as np
 
+from hierloco.io import brief
+
 PHYSICS_TIMESTEP = 0.002  # s
 CONTROL_TIMESTEP = 0.01  # s (100 Hz low-level control)
 PHYSICS_STEPS_PER_CONTROL = 5
@@ -213,7 +215,7 @@ class RobotSpec:
             values = getattr(self, name)
             if len(values) != 3 or not all(_finite(v) for v in values):
                 raise ValueError(f"{where}: {name} must be 3 finite numbers (vx m/s, vy m/s, yaw_rate rad/s), "
-                                 f"got {values!r}")
+                                 f"got {brief(values)}")
         if any(lo > hi for lo, hi in zip(self.command_low, self.command_high)):
             raise ValueError(f"{where}: command_low {self.command_low} exceeds command_high {self.command_high}")
         for name in ("max_roll", "max_pitch") + tuple(
@@ -346,11 +348,12 @@ class Obstacle:
 
 
 def compile_model(robot: RobotSpec, disabled_legs: Sequence[str] = (),
-                  obstacles: Sequence[Obstacle] = (), limp_legs: Sequence[str] = ()) -> mujoco.MjModel:
+                  obstacles: Sequence[Obstacle] = (), limp_legs: Sequence[str] = (), terrain=None) -> mujoco.MjModel:
     """Build the simulation model of ``robot`` with the legs in ``disabled_legs`` locked at their standing angles
     and those in ``limp_legs`` unpowered (their servos exert no torque; the joints keep their damping), in a world
-    with static ``obstacles`` (an arena). With ``robot.foot_friction`` the feet's contacts have that friction
-    coefficient (the foot geoms take priority over what they touch).
+    with static ``obstacles`` (an arena) on ``terrain`` (a built :class:`hierloco.envs.terrain.Terrain`, from
+    :func:`hierloco.envs.terrain.make_terrain`; ``None``: the floor plane alone). With ``robot.foot_friction`` the feet's contacts have that
+    friction coefficient (the foot geoms take priority over what they touch).
 
     Returns a :class:`mujoco.MjModel` whose ``nu`` actuators are position servos on ``robot.joint_names`` in that
     order, with one touch sensor per foot (in leg order, on the sites ``hierloco_touch_<leg>``) and nothing else
@@ -375,6 +378,9 @@ def compile_model(robot: RobotSpec, disabled_legs: Sequence[str] = (),
             raise ValueError(f"robot {robot.name!r}: base body {robot.base_body!r} is not a child of the world")
         base.add_freejoint(name=f"{robot.base_body}_root")
     _ensure_floor(spec)
+    if terrain is not None:  # the ground (docs/terrain.md)
+        terrain.add_to(spec)
+        obstacles = terrain.place_obstacles(obstacles)
     for i, obstacle in enumerate(obstacles):
         spec.worldbody.add_geom(name=f"obstacle_{i}", type=mujoco.mjtGeom.mjGEOM_BOX, size=obstacle.half_size,
                                 pos=[obstacle.x, obstacle.y, obstacle.half_size[2]],
@@ -448,14 +454,17 @@ def _ensure_floor(spec: mujoco.MjSpec) -> None:
         spec.worldbody.add_light(pos=[0, 0, 4], dir=[0, 0, -1], diffuse=[0.8, 0.8, 0.8])
 
 
-def _set_actuators(spec: mujoco.MjSpec, robot: RobotSpec) -> None:
-    """Replace the model's actuators by one position servo per leg joint, in ``robot.joint_names`` order."""
-    existing = {}
-    for act in list(spec.actuators):
-        if act.trntype == mujoco.mjtTrn.mjTRN_JOINT and act.target in robot.joint_names:
-            existing[act.target] = act
+def file_actuators(spec: mujoco.MjSpec, joint_names: Iterable[str]) -> dict[str, tuple[float | None, float,
+                                                                                       float | None]]:
+    """What the MJCF file's own actuators give each joint of ``joint_names`` that one drives: joint -> ``(kp, kv,
+    torque limit)``, ``kp`` (N m / rad) and ``kv`` (N m s / rad) those of a position servo (``None`` and 0 for a
+    torque motor, which needs the description's ``kp``), the limit in N m from the actuator's force range (or a
+    motor's control range) times its gear, ``None`` when the file sets none. A joint no actuator drives is absent."""
+    wanted = set(joint_names)
     found = {}
-    for act in existing.values():
+    for act in spec.actuators:
+        if act.trntype != mujoco.mjtTrn.mjTRN_JOINT or act.target not in wanted:
+            continue
         # a position servo has gain kp and bias (0, -kp, -kv); anything else (motor) needs the description's kp
         is_servo = act.gaintype == mujoco.mjtGain.mjGAIN_FIXED and act.biastype == mujoco.mjtBias.mjBIAS_AFFINE
         is_servo = is_servo and act.biasprm[1] == -act.gainprm[0] and act.gainprm[0] > 0
@@ -466,6 +475,45 @@ def _set_actuators(spec: mujoco.MjSpec, robot: RobotSpec) -> None:
             limit = float(act.ctrlrange[1]) * float(act.gear[0])  # a motor's ctrl is its torque
         found[act.target] = (float(act.gainprm[0]) if is_servo else None, float(-act.biasprm[2]) if is_servo else 0.0,
                              limit)
+    return found
+
+
+def actuation_problem(spec: mujoco.MjSpec, joint_names: Sequence[str], *, kp_given: bool,
+                      torque_limit_given: bool) -> str | None:
+    """Why the joints ``joint_names`` of the MJCF ``spec`` cannot become position servos as described, naming the
+    robot description keys that would fix it, or ``None``: a joint with neither a position servo in the file nor
+    ``kp`` given has no gain; one whose actuator sets no torque range (or that no actuator drives) and no
+    ``torque_limit`` given would get a servo of unlimited torque, which no motor has (``docs/robots.md``)."""
+    found = file_actuators(spec, joint_names)
+    none = (None, 0.0, None)
+    no_gain = set() if kp_given else {j for j in joint_names if found.get(j, none)[0] is None}
+    no_limit = set() if torque_limit_given else {j for j in joint_names if found.get(j, none)[2] is None}
+    if not no_gain and not no_limit:
+        return None
+    names = [j for j in joint_names if j in no_gain | no_limit]
+    unactuated = sum(j not in found for j in names)
+    listed = ", ".join(names[:4]) + (", ..." if len(names) > 4 else "")
+    if unactuated:
+        listed += "; no actuator in the file drives " + ("them" if unactuated == len(names)
+                                                         else f"{unactuated} of them")
+    lacks = " and ".join(what for what, short in (("no position servo", no_gain), ("no torque limit", no_limit))
+                         if short)
+    keys = " and ".join(key for key, short in (("kp (N m / rad)", no_gain),
+                                               ("torque_limit (N m, the motors' peak torque)", no_limit)) if short)
+    return (f"{len(names)} of its {len(joint_names)} leg joints ({listed}) have {lacks}; give {keys} in the robot "
+            "description (one number, one leg's values, one per joint, or a mapping leg -> values): hierloco never "
+            "makes a servo without a gain or a torque limit")
+
+
+def _set_actuators(spec: mujoco.MjSpec, robot: RobotSpec) -> None:
+    """Replace the model's actuators by one position servo per leg joint, in ``robot.joint_names`` order, each with
+    a gain and a torque limit (from the description, else from the file's actuator; a joint lacking either is
+    refused: :func:`actuation_problem`)."""
+    problem = actuation_problem(spec, robot.joint_names, kp_given=robot.kp is not None,
+                                torque_limit_given=robot.torque_limit is not None)
+    if problem is not None:
+        raise ValueError(f"robot {robot.name!r}: {problem}")
+    found = file_actuators(spec, robot.joint_names)
     for act in list(spec.actuators):
         spec.delete(act)
 
@@ -479,9 +527,6 @@ def _set_actuators(spec: mujoco.MjSpec, robot: RobotSpec) -> None:
         kp, kv, limit = found.get(joint_name, (None, 0.0, None))
         if robot.kp is not None:
             kp = robot.kp[i]
-        if kp is None:
-            raise ValueError(f"robot {robot.name!r}: joint {joint_name!r} has no position servo; give kp (N m / rad, "
-                             "RobotSpec.kp) to turn its motor into one")
         if robot.torque_limit is not None:
             limit = robot.torque_limit[i]
         if robot.joint_damping is not None:
@@ -492,9 +537,8 @@ def _set_actuators(spec: mujoco.MjSpec, robot: RobotSpec) -> None:
         if hi > lo:
             act.ctrlrange = [lo, hi]
             act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
-        if limit is not None:
-            act.forcerange = [-limit, limit]
-            act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
+        act.forcerange = [-limit, limit]
+        act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
 
 
 def _add_foot_sensors(spec: mujoco.MjSpec, robot: RobotSpec) -> None:

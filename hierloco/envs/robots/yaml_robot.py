@@ -32,10 +32,9 @@ import os
 from pathlib import Path
 from typing import Any, Callable
 
-import yaml
-
 from hierloco.envs.robots.mjcf import robot_from_mjcf
 from hierloco.envs.robots.spec import YAML_SOURCE_PREFIX, RobotSpec, is_number
+from hierloco.io import ArtifactError, brief, load_yaml
 
 YAML_SUFFIXES = (".yaml", ".yml")
 MJCF_KEY = "mjcf"
@@ -101,29 +100,31 @@ def is_robot_file(reference: str | os.PathLike) -> bool:
 
 def read_robot_yaml(path: str | os.PathLike) -> tuple[dict[str, Any], Path]:
     """The checked keyword arguments for :func:`robot_from_mjcf` in the YAML file ``path``, and the MJCF file's
-    absolute path. Raises :class:`ValueError` naming the file and the key."""
+    absolute path. Raises :class:`ValueError` naming the file and the key. The file is read safely
+    (:func:`hierloco.io.load_yaml`: no Python objects, aliases that expand to at most 100 000 values), and a message
+    shows only the start of a value (:func:`hierloco.io.brief`)."""
     path = Path(path).absolute()
     if not path.is_file():
         raise ValueError(f"robot description {str(path)!r}: no such file")
     try:
-        content = yaml.safe_load(path.read_text())
-    except (yaml.YAMLError, UnicodeDecodeError) as error:
-        raise ValueError(f"{path}: not a valid YAML file: {error}") from error
+        content = load_yaml(path)
+    except ArtifactError as error:
+        raise ValueError(f"robot description {error}") from None
     if not isinstance(content, dict):
         raise ValueError(f"{path}: a robot description is a mapping of keys ({', '.join(REQUIRED_KEYS)}, ...), "
                          f"got {type(content).__name__}")
     for key in content:
         if key not in KEY_TYPES:
-            close = difflib.get_close_matches(str(key), KEY_TYPES, n=2)
+            close = difflib.get_close_matches(str(key)[:200], KEY_TYPES, n=2)
             hint = f" (did you mean {' or '.join(repr(c) for c in close)}?)" if close else ""
-            raise ValueError(f"{path}: unknown key {key!r}{hint}; the keys are {', '.join(KEY_TYPES)}")
+            raise ValueError(f"{path}: unknown key {brief(key)}{hint}; the keys are {', '.join(KEY_TYPES)}")
     for key in REQUIRED_KEYS:
         if key not in content:
             raise ValueError(f"{path}: missing key {key!r} (required: {', '.join(REQUIRED_KEYS)})")
     for key, value in content.items():
         check, what = KEY_TYPES[key]
         if not check(value):
-            raise ValueError(f"{path}: key {key!r} must be {what}, got {value!r}")
+            raise ValueError(f"{path}: key {key!r} must be {what}, got {brief(value)}")
     mjcf = Path(content.pop(MJCF_KEY))
     mjcf = mjcf if mjcf.is_absolute() else path.parent / mjcf
     if not mjcf.is_file():
