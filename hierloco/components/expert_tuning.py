@@ -12,8 +12,12 @@ for a latent gait policy that reproduces them in simulation (:func:`hierloco.com
    their recorded joint targets replayed open loop from standing as the gait policy's check replays ``pi(., z)``.
    A candidate passes when its experts reach ``min_reach`` of the box on every axis, none falls, and at least
    ``min_reproduced_fraction`` of the replays walk within 0.05 m/s of what was recorded (no gait policy can
-   reproduce an expert whose own targets do not). The stages: gait period x foot lift; then standing height x
-   servo gains around the two best; then, only when nothing passes, smaller command boxes.
+   reproduce an expert whose own targets do not). The stages: gait period x foot lift x two servo settings (the
+   description's own gains, and the rule of ``docs/robots.md``: kp for a 0.1 rad sag under the standing load,
+   joint damping 0.02 s x kp); then, unless a candidate already passes with a margin (``SCORE_CAP``), the rest of
+   the servo grid around the two best gaits (:func:`servo_settings`: kp for a sag of 0.1 and 0.05 rad x joint
+   damping of 0.01, 0.02 and 0.04 s x kp), and the body lowered around the best; then, only when nothing passes,
+   smaller command boxes.
 2. **verification** of the best candidates, in order, while the budget lasts: the expert library exactly as the
    experts stage builds it, its tracking check, and a gait policy trained and checked in simulation
    (:func:`hierloco.components.gait_policy_fit.fit_gait_policy`, which adapts the training when the first fit falls
@@ -21,6 +25,9 @@ for a latent gait policy that reproduces them in simulation (:func:`hierloco.com
    is the one found; when only an adapted fit passes, the next candidates are verified too while the budget
    allows another verification, and failing a better one, the adapted fit's ``policy`` overrides are part of what
    is found.
+3. **what made the difference**: each change the found parameters make to the description's is undone alone, the
+   others kept, and screened beside them (:func:`difference_candidates`): a change whose undoing fails the
+   screening is one the robot needs; one whose undoing passes with a lower score gave it margin.
 
 Example:
     >>> from hierloco.envs.robots import get_robot
@@ -62,7 +69,7 @@ from hierloco.envs.robots import (
     get_robot,
     joint_qvel_indices,
 )
-from hierloco.envs.robots.check import standing_statics
+from hierloco.envs.robots.check import SUGGESTED_SAG, standing_statics
 
 REPRODUCTION_TOLERANCE = 0.05  # m/s: a replay or a policy reproduces an expert within this (check_gait_policy)
 MIN_REPRODUCED_FRACTION = 0.8  # the gait-policy check's default bar (checks.min_reproduced_fraction)
@@ -71,8 +78,13 @@ MAX_REACH_SHORTFALL = 0.01  # m: a candidate whose footholds are further out of 
 SATURATION_ANGLE = 0.05  # rad: a servo's kp is at most its torque limit over this error
 SWING_FRACTIONS = (0.12, 0.2, 0.3)  # foot lift as a fraction of the hips' height
 LOWERINGS = (0.1, 0.2)  # the body lowered by these fractions of the feet's depth below the hips
-GAIN_FACTORS = ((1.0, 1.0), (2.0, 1.0), (1.0, 2.0), (2.0, 2.0))  # (kp, joint_damping) times the description's
+SAG_TARGETS = (0.1, 0.05)  # rad: kp scaled up so that the joint sagging most under the standing load sags this much
+DAMPING_TIMES = (0.01, 0.02, 0.04)  # s: joint damping tried as this times kp
+RULE_SAG, RULE_DAMPING_TIME = SUGGESTED_SAG, 0.02  # docs/robots.md's rule for servos, screened beside the own
+MIN_KP_STEP = 1.1  # a kp level less than this factor above the description's is the description's
 BOX_SCALES = (0.75, 0.5)  # smaller command boxes, tried only when nothing passes
+POLICY_THREADS = 1  # torch threads of the verified gait policy: on 2 shared cores (load 7-9), 50 epochs of 2 x 512
+# took 13-16 s and 5-6 CPU s on one thread, 54-55 s and 23-25 CPU s on two
 SCORE_CAP = 1.25  # candidates with this much margin on both bars are equally good; then the fewest changes win
 
 
@@ -204,48 +216,118 @@ def _scaled_box(params: ExpertParameters, scale: float) -> tuple[tuple, tuple]:
     return tuple((centre - scale * half).round(4).tolist()), tuple((centre + scale * half).round(4).tolist())
 
 
-def gait_candidates(robot: RobotSpec, params: ExpertParameters, steps_per_action: int = STEPS_PER_ACTION
+def gait_candidates(robot: RobotSpec, params: ExpertParameters, steps_per_action: int = STEPS_PER_ACTION, *,
+                    gait_periods: Sequence[float] | None = None, swing_heights: Sequence[float] | None = None
                     ) -> list[Candidate]:
     """Stage 1: every admissible gait period of at least ``MIN_GAIT_PERIOD`` s x the foot lifts (the
-    description's and ``SWING_FRACTIONS`` of the hips' height)."""
+    description's and ``SWING_FRACTIONS`` of the hips' height), or the ``gait_periods`` and ``swing_heights``
+    given."""
     periods = [p for p in admissible_gait_periods(len(robot.gait_groups), steps_per_action) if p >= MIN_GAIT_PERIOD]
+    if gait_periods is not None:
+        periods = [float(p) for p in gait_periods]
     hips = float(np.mean([leg.hip_height for leg in standing_statics(params.apply(robot)).legs]))
     swings = [params.swing_height]
     for fraction in SWING_FRACTIONS:
         lift = round(fraction * hips, 3)
         if all(abs(lift - s) > 0.15 * s for s in swings):
             swings.append(lift)
+    if swing_heights is not None:
+        swings = [float(h) for h in swing_heights]
     return [Candidate(replace(params, gait_period=p, swing_height=s), f"gait_period {p:g} s, swing_height {s:g} m")
             for p in periods for s in sorted(swings)]
 
 
-def posture_and_servo_candidates(robot: RobotSpec, base: Candidate) -> list[Candidate]:
-    """Stage 2, around ``base``: the body lowered (``LOWERINGS``) x servo gains and damping (``GAIN_FACTORS``),
-    kp capped so that a ``SATURATION_ANGLE`` error saturates no motor."""
-    params = base.params
-    model = compile_model(params.apply(robot))
-    limits = np.where(model.actuator_forcerange[:, 1] > model.actuator_forcerange[:, 0],
-                      np.abs(model.actuator_forcerange).max(1), np.inf)
-    postures = [(params.standing_height, params.standing_pose, "")]
-    for lowering in LOWERINGS:
-        lowered = lowered_posture(robot, params, lowering)
-        if lowered is not None:
-            postures.append((*lowered, f", body lowered {lowering:.0%}"))
+@dataclass(frozen=True)
+class ServoSetting:
+    """Servo gains and joint damping, with a short label.
+
+    Attributes:
+        kp: N m / rad per joint. joint_damping: N m s / rad per joint. label: what it changes (empty for the
+            description's own).
+    """
+
+    kp: tuple[float, ...]
+    joint_damping: tuple[float, ...]
+    label: str
+
+    def on(self, base: Candidate) -> Candidate:
+        """``base`` with these servos."""
+        return Candidate(replace(base.params, kp=self.kp, joint_damping=self.joint_damping), base.label + self.label)
+
+
+def _round_significant(value: float, digits: int = 2) -> float:
+    return float(f"{value:.{digits}g}")
+
+
+def servo_settings(robot: RobotSpec, params: ExpertParameters) -> list[ServoSetting]:
+    """The servo grid around ``params`` (the robot standing as they describe it): first the description's own,
+    second the rule of ``docs/robots.md`` (kp for a ``RULE_SAG`` sag, damping ``RULE_DAMPING_TIME`` x kp), then
+    the rest of kp x joint damping:
+
+    - kp: the description's, and the description's scaled up so that the joint sagging most under the standing
+      load (static torque / kp, :func:`hierloco.envs.robots.check.standing_statics`) sags ``SAG_TARGETS`` rad
+      (two significant digits; capped so that a ``SATURATION_ANGLE`` error saturates no motor; a level less than
+      ``MIN_KP_STEP`` above the description's is the description's);
+    - joint damping: the description's, and ``DAMPING_TIMES`` s x kp.
+
+    The torque limits are the file's (a robot without them is refused when it is read).
+
+    Example:
+        >>> from hierloco.envs.robots import get_robot
+        >>> robot = get_robot("a1")
+        >>> settings = servo_settings(robot, ExpertParameters.of(robot))
+        >>> settings[0].label, settings[1].label
+        ('', ', joint_damping 2 (0.02 s x kp)')
+    """
+    tuned = params.apply(robot)
+    model = compile_model(tuned)
+    statics = standing_statics(tuned, model)
+    static = np.array([t for leg in statics.legs for t in leg.static_torque])
+    kp0, damping0 = np.asarray(params.kp, float), np.asarray(params.joint_damping, float)
+    limited = model.actuator_forcerange[:, 1] > model.actuator_forcerange[:, 0]
+    cap = np.where(limited, np.abs(model.actuator_forcerange).max(1), np.inf) / SATURATION_ANGLE
+    sag = float(np.max(static / kp0))
+    kp_levels = [(kp0, "", None)]
+    for target in SAG_TARGETS:
+        factor = sag / target
+        if factor >= MIN_KP_STEP:
+            kp = np.maximum(np.minimum([_round_significant(k * factor) for k in kp0], cap), kp0)
+            if not np.allclose(kp, kp0):  # not capped back to the description's
+                kp_levels.append((kp, f", kp {per_joint_text(robot, kp)} (sag {target:g} rad)", target))
+    rule_kp = RULE_SAG if any(target == RULE_SAG for _, _, target in kp_levels) else None
+    settings: dict[tuple, ServoSetting] = {}
+    rule = None
+    for kp, kp_label, target in kp_levels:
+        dampings = [(damping0, "", None)]
+        for time_ in DAMPING_TIMES:
+            damping = np.array([_round_significant(v) for v in time_ * kp])
+            dampings.append((damping, f", joint_damping {per_joint_text(robot, damping)} ({time_:g} s x kp)", time_))
+        for damping, damping_label, time_ in dampings:
+            key = (tuple(np.round(kp, 6)), tuple(np.round(damping, 6)))
+            if key not in settings:
+                settings[key] = ServoSetting(tuple(float(k) for k in kp), tuple(float(d) for d in damping),
+                                             kp_label + damping_label)
+            if rule is None and target == rule_kp and time_ == RULE_DAMPING_TIME:
+                rule = settings[key]
+    ordered = list(settings.values())
+    ordered.remove(rule)
+    return [ordered[0], rule, *ordered[1:]]
+
+
+def per_joint_text(robot: RobotSpec, values: Sequence[float]) -> str:
+    """Per-joint values as :func:`per_joint_yaml` writes them, for a label."""
+    return per_joint_yaml(robot, values, digits=3)
+
+
+def posture_candidates(robot: RobotSpec, base: Candidate) -> list[Candidate]:
+    """Stage 3, around ``base``: the body lowered (``LOWERINGS``) with the feet where they stand (leg IK)."""
     out = []
-    for height, pose, posture_label in postures:
-        for kp_factor, damping_factor in GAIN_FACTORS:
-            kp = np.minimum(np.asarray(params.kp) * kp_factor, limits / SATURATION_ANGLE)
-            kp = np.maximum(kp, np.asarray(params.kp))
-            if kp_factor > 1 and np.allclose(kp, params.kp):
-                continue
-            if not posture_label and kp_factor == 1 and damping_factor == 1:
-                continue  # base itself
-            gains = (f", kp x{kp_factor:g}" if kp_factor != 1 else "") + (
-                f", joint_damping x{damping_factor:g}" if damping_factor != 1 else "")
-            out.append(Candidate(replace(params, standing_height=float(height), standing_pose=tuple(pose),
-                                         kp=tuple(float(k) for k in kp),
-                                         joint_damping=tuple(float(d) * damping_factor for d in params.joint_damping)),
-                                 base.label + posture_label + gains))
+    for lowering in LOWERINGS:
+        lowered = lowered_posture(robot, base.params, lowering)
+        if lowered is not None:
+            height, pose = lowered
+            out.append(Candidate(replace(base.params, standing_height=float(height), standing_pose=tuple(pose)),
+                                 base.label + f", body lowered {lowering:.0%}"))
     return out
 
 
@@ -478,6 +560,97 @@ class Verification:
             return None
         return self.policy_attempts[-1]
 
+    @property
+    def progress(self) -> tuple:
+        """How far it got, for choosing the verification to show when none passes: the stage reached (library
+        built, its tracking passed, its replay passed, a gait policy trained), then that stage's number."""
+        if self.report is None:
+            return (0, 0.0)
+        if not self.report.ok:
+            return (1, self.report.worst_reach)
+        if self.reproduced_fraction is None:
+            return (2, self.replayed_fraction or 0.0)
+        return (3, self.reproduced_fraction)
+
+    def limit_lines(self) -> list[str]:
+        """What limits it, from its own numbers only (the library it built, its replay, its gait policy)."""
+        if self.report is None:
+            return [self.problem]
+        lines = [axis.describe() for axis in self.report.axes if not axis.ok] + [self.problem]
+        if not self.report.ok:
+            lines.append(f"the experts' own targets, replayed open loop: {self.replayed_fraction:.0%} within "
+                         f"{REPRODUCTION_TOLERANCE} m/s")
+        return lines
+
+
+@dataclass(frozen=True)
+class Difference:
+    """One change of the parameters found, undone alone (the others kept) and screened beside them.
+
+    Attributes:
+        name: the parameter (``standing_height`` stands for the height and its pose, ``command box`` for both
+            edges). before, after: its value in the description and in what was found, as text.
+        undone: the screening of the parameters found with this change undone. found: theirs, in the same batch.
+    """
+
+    name: str
+    before: str
+    after: str
+    undone: CandidateScore
+    found: CandidateScore
+
+    @property
+    def needed(self) -> bool:
+        """Undoing it fails the screening: this change made the difference."""
+        return not self.undone.passes
+
+    @property
+    def margin(self) -> bool:
+        """Undoing it still passes, with less margin (a lower score, capped at ``SCORE_CAP``)."""
+        return not self.needed and min(self.undone.score, SCORE_CAP) < min(self.found.score, SCORE_CAP) - 1e-9
+
+    def describe(self) -> str:
+        if self.needed:
+            verdict = "it made the difference"
+        elif self.margin:
+            verdict = (f"passes without it with less margin (score {self.undone.score:.2f}, with it "
+                       f"{min(self.found.score, SCORE_CAP):.2f}{'+' if self.found.score > SCORE_CAP else ''})")
+        else:
+            verdict = "not needed alone"
+        return f"{self.name} {self.before} -> {self.after}: undone, {self.undone.describe().split(': ', 1)[-1]}; " \
+               f"{verdict}"
+
+
+DIFFERENCE_GROUPS = (("gait_period", ("gait_period",)), ("swing_height", ("swing_height",)),
+                     ("standing_height", ("standing_height", "standing_pose")), ("kp", ("kp",)),
+                     ("joint_damping", ("joint_damping",)), ("command box", ("command_low", "command_high")))
+
+
+def _value_text(robot: RobotSpec, params: ExpertParameters, names: Sequence[str]) -> str:
+    if names[0] in ("kp", "joint_damping"):
+        return per_joint_text(robot, getattr(params, names[0]))
+    if names[0] == "command_low":
+        return f"{_number(params.command_low[0], 3)}..{_number(params.command_high[0], 3)} m/s, " \
+               f"{_number(params.command_low[1], 3)}..{_number(params.command_high[1], 3)} m/s, " \
+               f"{_number(params.command_low[2], 3)}..{_number(params.command_high[2], 3)} rad/s"
+    unit = " s" if names[0] == "gait_period" else " m"
+    return _number(getattr(params, names[0]), 4) + unit
+
+
+def difference_candidates(robot: RobotSpec, found: ExpertParameters, reference: ExpertParameters
+                          ) -> list[tuple[str, str, str, Candidate]]:
+    """For each change ``found`` makes to ``reference`` (``DIFFERENCE_GROUPS``), ``(name, before, after,
+    candidate)``: ``found`` with that change alone undone."""
+    changed = set(found.changed(reference))
+    out = []
+    for name, names in DIFFERENCE_GROUPS:
+        if not changed & set(names):
+            continue
+        undone = replace(found, **{n: getattr(reference, n) for n in names})
+        out.append((name, _value_text(robot, reference, names), _value_text(robot, found, names),
+                    Candidate(undone, f"{name} undone")))
+    return out
+
 
 @dataclass
 class TuningResult:
@@ -487,7 +660,9 @@ class TuningResult:
         robot: the robot searched. reference: its own parameters. found: whether a candidate was verified.
         best: the best candidate's screening score (``None`` when nothing could be run).
         verifications: the candidates verified, in order. screened: every screening score, per stage.
-        limits: when nothing is found, what limits the best candidate (lines). seconds: the wall-clock.
+        limits: when nothing is found, what limits it (lines, each saying whether its numbers are verified or
+            screened). seconds: the wall-clock. differences: each change of the parameters found undone alone
+            (:class:`Difference`).
     """
 
     robot: RobotSpec
@@ -499,13 +674,42 @@ class TuningResult:
     limits: list[str]
     seconds: float
     min_reproduced_fraction: float = MIN_REPRODUCED_FRACTION
+    differences: list[Difference] = field(default_factory=list)
+
+    @property
+    def verified(self) -> Verification | None:
+        """The candidate found: the first verified whose gait policy passes as configured, else the first whose
+        adapted fit passes."""
+        passing = [v for v in self.verifications if v.ok]
+        return next((v for v in passing if v.policy_adapted is None), passing[0] if passing else None)
+
+    @property
+    def shown(self) -> Verification | None:
+        """The verification the result is about: the one found, else the one that got furthest (``None`` when
+        none ran)."""
+        if self.verified is not None:
+            return self.verified
+        return max(self.verifications, key=lambda v: v.progress, default=None)
 
     @property
     def params(self) -> ExpertParameters | None:
-        """The parameters found (the verified candidate's), else the best screened."""
-        if self.verified is not None:
-            return self.verified.candidate.params
+        """The parameters found (the verified candidate's), else those of the verification shown, else the best
+        screened."""
+        if self.shown is not None:
+            return self.shown.candidate.params
         return self.best.candidate.params if self.best is not None else None
+
+    @property
+    def policy_overrides(self) -> dict:
+        """The recipe's ``policy.*`` overrides the found candidate's gait policy needs (empty when the configured
+        training reproduces its experts)."""
+        verified = self.verified
+        return dict((verified.policy_adapted or {}).get("overrides", {})) if verified is not None else {}
+
+    def override_lines(self) -> list[str]:
+        """``policy.epochs=300``-style command-line overrides of a recipe, one per line."""
+        return [f"policy.{key}={value:g}" if isinstance(value, (int, float)) else f"policy.{key}={value}"
+                for key, value in self.policy_overrides.items()]
 
     def tuned_robot(self) -> RobotSpec:
         """The robot with the parameters found (its own when nothing was found)."""
@@ -514,21 +718,22 @@ class TuningResult:
 
     def summary(self) -> dict:
         """A JSON-able record (for a run's ``run.json``): whether found, the parameters and the YAML lines, what
-        changed, the tuned robot's fingerprint, the verifications (tracking, replay, gait-policy fits), the
-        screening counts and the wall-clock."""
+        changed and which changes made the difference, the tuned robot's fingerprint, the verifications (tracking,
+        replay, gait-policy fits), the screening counts and the wall-clock."""
         from dataclasses import asdict
 
         from hierloco.envs.robots import robot_fingerprint
 
         params = self.params
-        verified = self.verified
         return {
             "found": self.found, "seconds": round(self.seconds, 1),
             "parameters": asdict(params) if params is not None else None,
             "changed": params.changed(self.reference) if params is not None else [],
             "yaml": params.yaml_lines(self.robot, only=params.changed(self.reference)) if params is not None else [],
             "tuned_fingerprint": robot_fingerprint(self.tuned_robot()),
-            "policy_overrides": (verified.policy_adapted or {}).get("overrides", {}) if verified is not None else {},
+            "policy_overrides": self.policy_overrides,
+            "differences": [{"name": d.name, "before": d.before, "after": d.after, "needed": d.needed,
+                             "margin": d.margin, "undone": d.undone.describe()} for d in self.differences],
             "screened": {stage: {"candidates": len(scores), "pass": sum(s.passes for s in scores)}
                          for stage, scores in self.screened.items()},
             "verifications": [{"label": v.candidate.label, "problem": v.problem,
@@ -539,12 +744,9 @@ class TuningResult:
             "limits": self.limits,
         }
 
-    @property
-    def verified(self) -> Verification | None:
-        """The candidate found: the first verified whose gait policy passes as configured, else the first whose
-        adapted fit passes."""
-        passing = [v for v in self.verifications if v.ok]
-        return next((v for v in passing if v.policy_adapted is None), passing[0] if passing else None)
+
+def _gait_key(params: ExpertParameters) -> tuple:
+    return (params.gait_period, params.swing_height, params.standing_height, params.command_low, params.command_high)
 
 
 def tune_expert_parameters(
@@ -560,6 +762,8 @@ def tune_expert_parameters(
     min_reproduced_fraction: float = MIN_REPRODUCED_FRACTION,
     verify: bool = True,
     max_verifications: int = 3,
+    gait_periods: Sequence[float] | None = None,
+    swing_heights: Sequence[float] | None = None,
     seed: int = 0,
     nthread: int | None = None,
     log: Callable[[str], None] | None = None,
@@ -580,6 +784,9 @@ def tune_expert_parameters(
         min_reproduced_fraction: the gait policy's bar (``checks.min_reproduced_fraction``).
         verify: build the library and train the gait policy for the best candidates (else screening only).
         max_verifications: at most this many candidates verified.
+        gait_periods, swing_heights: s and m, restrict the first stage to these (default: every admissible period
+            of at least ``MIN_GAIT_PERIOD`` s, the description's foot lift and ``SWING_FRACTIONS`` of the hips'
+            height).
         log: called with a line per step (progress for a terminal).
 
     Returns:
@@ -594,29 +801,51 @@ def tune_expert_parameters(
     left = lambda: budget_seconds - (time.perf_counter() - start)  # noqa: E731
     screened: dict[str, list[CandidateScore]] = {}
 
-    def run_stage(name: str, candidates: list[Candidate]) -> None:
+    def run_stage(name: str, candidates: list[Candidate]) -> list[CandidateScore]:
         tic = time.perf_counter()
         scores = screen_candidates(robot, candidates, **screen)
         screened[name] = scores
         best = rank(scores, reference)[0]
         log(f"  {name}: {len(candidates)} candidates, {sum(s.passes for s in scores)} pass "
             f"({time.perf_counter() - tic:.0f} s); best: {best.describe()}")
+        return scores
 
-    run_stage("gait period x swing height", gait_candidates(robot, reference, steps_per_action))
-    ranked = rank(screened["gait period x swing height"], reference)
-    if left() > 0:
-        stage2 = []
-        for score in [s for s in ranked if s.num_commands][:2]:
-            stage2 += posture_and_servo_candidates(robot, score.candidate)
+    def everything() -> list[CandidateScore]:
+        return [s for name, scores in screened.items() for s in scores]
+
+    # 1. gait period x foot lift x (the description's servos, the docs' rule)
+    settings = servo_settings(robot, reference)
+    gaits = gait_candidates(robot, reference, steps_per_action, gait_periods=gait_periods,
+                            swing_heights=swing_heights)
+    run_stage("gait period x swing height x servo gains", [s.on(g) for g in gaits for s in settings[:2]])
+    def settled() -> bool:  # a candidate passes with the margin beyond which the fewest changes win
+        return any(s.passes and s.score >= SCORE_CAP for s in everything())
+
+    # 2. the rest of the servo grid around the two best gaits, unless one already passes with that margin
+    if left() > 0 and not settled():
+        bases, seen = [], set()
+        for score in rank(everything(), reference):
+            key = _gait_key(score.candidate.params)
+            if score.num_commands and key not in seen:
+                seen.add(key)
+                bases.append(next(g for g in gaits if _gait_key(g.params) == key))
+            if len(bases) == 2:
+                break
+        stage2 = [s.on(base) for base in bases for s in servo_settings(robot, base.params)[2:]]
         if stage2:
-            run_stage("standing height x servo gains", stage2)
-    everything = [s for scores in screened.values() for s in scores]
-    if not any(s.passes for s in everything) and left() > 0:
-        tops = [s for s in rank(everything, reference) if s.num_commands][:3]
+            run_stage("servo gains x joint damping", stage2)
+    # 3. the body lowered around the best, likewise
+    if left() > 0 and not settled():
+        tops = [s for s in rank(everything(), reference) if s.num_commands][:1]
+        lowered = [c for s in tops for c in posture_candidates(robot, s.candidate)]
+        if lowered:
+            run_stage("standing height", lowered)
+    # 4. smaller command boxes, only when nothing passes
+    if not any(s.passes for s in everything()) and left() > 0:
+        tops = [s for s in rank(everything(), reference) if s.num_commands][:3]
         if tops:
             run_stage("smaller command boxes", [c for s in tops for c in box_candidates(s.candidate)])
-            everything = [s for scores in screened.values() for s in scores]
-    ranked = rank(everything, reference)
+    ranked = rank(everything(), reference)
     best = ranked[0] if ranked and ranked[0].num_commands else None
     verifications: list[Verification] = []
     if verify and best is not None:
@@ -632,18 +861,32 @@ def tune_expert_parameters(
             if verification.ok and verification.policy_adapted is None:
                 break  # else look on, while the budget lasts, for one the configured training reproduces
     found = any(v.ok for v in verifications) if verify else bool(best is not None and best.passes)
-    limits = [] if found else _limits(best, verifications)
-    return TuningResult(robot=robot, reference=reference, found=found, best=best, verifications=verifications,
-                        screened=screened, limits=limits, seconds=time.perf_counter() - start,
-                        min_reproduced_fraction=min_reproduced_fraction)
+    result = TuningResult(robot=robot, reference=reference, found=found, best=best, verifications=verifications,
+                          screened=screened, limits=[], seconds=0.0, min_reproduced_fraction=min_reproduced_fraction)
+    if found:  # 5. which change made the difference: each undone alone, screened
+        undone = difference_candidates(robot, result.params, reference)
+        if undone:
+            tic = time.perf_counter()
+            found_score, *scores = screen_candidates(
+                robot, [Candidate(result.params, "found"), *(c for *_, c in undone)], **screen)
+            result.differences = [Difference(name, before, after, score, found_score)
+                                  for (name, before, after, _), score in zip(undone, scores)]
+            log(f"  what made the difference: {len(undone)} change{'s' if len(undone) > 1 else ''} undone one at a "
+                f"time, {sum(d.needed for d in result.differences)} needed ({time.perf_counter() - tic:.0f} s)")
+    else:
+        result.limits = _limits(best, verifications)
+    result.seconds = time.perf_counter() - start
+    return result
 
 
 def verify_candidate(robot: RobotSpec, candidate: Candidate, *, num_experts: int, settle_time: float,
                      steps_per_action: int, policy: dict | None, min_reach: float, min_reproduced_fraction: float,
                      seed: int, budget_seconds: float, log: Callable[[str], None]) -> Verification:
     """Checks one candidate as the pipeline runs it: :func:`build_expert_library` (the reference IK), its tracking
-    report, the library replayed open loop, and :func:`hierloco.components.gait_policy_fit.fit_gait_policy`."""
+    report, the library replayed open loop, and :func:`hierloco.components.gait_policy_fit.fit_gait_policy` (on
+    ``POLICY_THREADS`` torch thread)."""
     from hierloco.components.gait_policy_fit import fit_gait_policy
+    from hierloco.components.sac import torch_threads
 
     tic = time.perf_counter()
     tuned = candidate.params.apply(robot)
@@ -670,8 +913,9 @@ def verify_candidate(robot: RobotSpec, candidate: Candidate, *, num_experts: int
                                 "no gait policy can do better")
     else:
         remaining = budget_seconds - (time.perf_counter() - tic)
-        fit = fit_gait_policy(library, robot=tuned, min_reproduced_fraction=min_reproduced_fraction,
-                              budget_seconds=max(remaining, 0.0), min_attempts=2, seed=seed, **(policy or {}))
+        with torch_threads(POLICY_THREADS):
+            fit = fit_gait_policy(library, robot=tuned, min_reproduced_fraction=min_reproduced_fraction,
+                                  budget_seconds=max(remaining, 0.0), min_attempts=2, seed=seed, **(policy or {}))
         verification.reproduced_fraction = fit.reproduced_fraction
         verification.policy_attempts = fit.attempts
         for attempt in fit.attempts:
@@ -685,25 +929,29 @@ def verify_candidate(robot: RobotSpec, candidate: Candidate, *, num_experts: int
 
 
 def _limits(best: CandidateScore | None, verifications: list[Verification]) -> list[str]:
-    """What limits the best candidate, in lines."""
+    """What limits the search, in lines: the verification that got furthest, from its own numbers (``verified``),
+    then the best screened candidate when it does not pass (``screened``)."""
     if best is None:
         return ["no candidate could be run: the gait's footholds are out of the legs' reach for every gait period"]
     lines = []
-    for verification in verifications:
-        lines.append(f"verified {verification.candidate.label}: {verification.problem}")
+    shown = max(verifications, key=lambda v: v.progress, default=None)
+    if shown is not None:
+        lines += [f"verified ({shown.candidate.label}): {line}" for line in shown.limit_lines()]
     if not best.passes:
+        where = f"screened ({best.candidate.label})"
         if best.fell:
-            lines.append(f"{best.fell} of {best.num_commands} screened experts fell")
+            lines.append(f"{where}: {best.fell} of {best.num_commands} experts fell")
         for axis in best.axes:
             if not axis.ok:
-                lines.append(axis.describe())
+                lines.append(f"{where}: {axis.describe()}")
         if best.replayed_fraction < best.min_reproduced_fraction:
-            lines.append(f"replayed open loop, {best.replayed_fraction:.0%} of the experts walk as recorded (need "
-                         f"{best.min_reproduced_fraction:.0%}): the gait is not steady without feedback")
+            lines.append(f"{where}: replayed open loop, {best.replayed_fraction:.0%} of the experts walk as "
+                         f"recorded (need {best.min_reproduced_fraction:.0%}): the gait is not steady without "
+                         "feedback")
     return lines
 
 
-__all__ = ["Candidate", "CandidateScore", "ExpertParameters", "TuningResult", "Verification", "box_candidates",
-           "gait_candidates", "lowered_posture", "per_joint_yaml", "posture_and_servo_candidates", "rank",
-           "screen_candidates", "screening_commands", "tune_expert_parameters",
-           "verify_candidate"]
+__all__ = ["Candidate", "CandidateScore", "DIFFERENCE_GROUPS", "Difference", "ExpertParameters", "ServoSetting",
+           "TuningResult", "Verification", "box_candidates", "difference_candidates", "gait_candidates",
+           "lowered_posture", "per_joint_text", "per_joint_yaml", "posture_candidates", "rank", "screen_candidates",
+           "screening_commands", "servo_settings", "tune_expert_parameters", "verify_candidate"]

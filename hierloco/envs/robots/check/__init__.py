@@ -9,10 +9,12 @@ Two parts:
   runs it first, so a folded pose is refused at once instead of grinding in leg IK.
 - the command line (``python -m hierloco.envs.robots.check robot.yaml``, or ``hierloco-robot-check``;
   ``check/__main__.py``) runs those
-  checks, then searches the expert controller's free parameters for experts that walk as commanded and a latent
-  gait policy that reproduces them (:func:`hierloco.components.expert_tuning.tune_expert_parameters`), and prints
-  the parameters found as YAML lines to paste into the robot's file, with a per-axis tracking table and the gait
-  policy's reproduction. Exit status 0 when found, 2 otherwise (and for bad input: one ``error: ...`` line).
+  checks, then searches the expert controller's free parameters (gait period, foot lift, standing height, servo
+  gains and joint damping, command box) for experts that walk as commanded and a latent gait policy that
+  reproduces them (:func:`hierloco.components.expert_tuning.tune_expert_parameters`), and prints the verified
+  per-axis tracking table and the gait policy's reproduction, which change made the difference, the parameters
+  found as YAML lines to paste into the robot's file and any recipe overrides as lines to paste on its command
+  line. Exit status 0 when found, 2 otherwise (and for bad input: one ``error: ...`` line).
 
 Example:
     >>> from hierloco.envs.robots import get_robot
@@ -46,6 +48,7 @@ FOOT_DROP_SUGGESTED = 0.6  # the suggested pose puts the feet this fraction of t
 FLOOR_TOLERANCE = 0.01  # m: a foot on the floor has its bottom within this of the floor (standing pose)
 MAX_STATIC_TORQUE = 0.75  # static torque holding the robot on its stance legs, as a fraction of the torque limit
 MAX_STATIC_SAG = 0.25  # rad: a servo holding that torque is off its target by torque / kp, at most this
+SUGGESTED_SAG = 0.1  # rad: the sag of the servos that walk (docs/robots.md, choosing kp): kp ~ static torque / this
 LIMIT_MARGIN = 1e-6  # rad
 
 
@@ -303,14 +306,17 @@ def description_summary(robot: RobotSpec) -> str:
     drop = min(leg.foot_drop / leg.reach for leg in statics.legs)
     ratio = max((t / limit for leg in statics.legs for t, limit in zip(leg.static_torque, leg.torque_limit)),
                 default=0.0)
-    sag = max((t / kp for leg in statics.legs for t, kp in zip(leg.static_torque, leg.kp) if kp > 0), default=0.0)
+    sags = [(t / kp, t) for leg in statics.legs for t, kp in zip(leg.static_torque, leg.kp) if kp > 0]
+    sag, torque = max(sags, default=(0.0, 0.0))
+    hint = (f"; servos that walk sag about {SUGGESTED_SAG} rad, kp {torque / SUGGESTED_SAG:.0f} N m/rad at that "
+            "joint (docs/robots.md: choosing kp)" if sag > 1.5 * SUGGESTED_SAG else "")
     return (f"standing pose inside the joint limits; feet {min(leg.foot_drop for leg in statics.legs):.3f} m or more "
             f"below the hips ({drop:.0%} of the reach, need {MIN_FOOT_DROP:.0%}) and on the floor; holding "
             f"{statics.mass:.1f} kg on {statics.stance_legs} stance legs takes at most {ratio:.0%} of a joint's torque "
             f"limit (need {MAX_STATIC_TORQUE:.0%} or less) and the servos sag {sag:.2f} rad at most (need "
-            f"{MAX_STATIC_SAG} or less)")
+            f"{MAX_STATIC_SAG} or less){hint}")
 
 
 __all__ = ["EXIT_FOUND", "EXIT_NOT_FOUND", "FLOOR_TOLERANCE", "LegStatics", "MAX_STATIC_SAG", "MAX_STATIC_TORQUE",
-           "MIN_FOOT_DROP", "RobotDescriptionError", "StandingStatics", "description_problems", "description_summary",
-           "standing_statics", "suggested_standing_pose"]
+           "MIN_FOOT_DROP", "RobotDescriptionError", "SUGGESTED_SAG", "StandingStatics", "description_problems",
+           "description_summary", "standing_statics", "suggested_standing_pose"]

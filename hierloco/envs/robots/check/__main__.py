@@ -1,6 +1,7 @@
 """``hierloco-robot-check ROBOT`` (``python -m hierloco.envs.robots.check``): the description's problems in
 milliseconds (:mod:`hierloco.envs.robots.check`), then the search of the expert controller's parameters
-(:func:`hierloco.components.expert_tuning.tune_expert_parameters`) and the YAML lines to paste (``docs/robots.md``).
+(:func:`hierloco.components.expert_tuning.tune_expert_parameters`), what made the difference, and the lines to
+paste: YAML lines for the robot's file, recipe overrides for the command line (``docs/robots.md``).
 """
 
 from __future__ import annotations
@@ -90,51 +91,63 @@ def main(argv=None) -> int:
         robot, budget_seconds=args.budget, num_experts=args.experts, settle_time=args.settle_time,
         policy={"epochs": args.epochs, "hidden": args.hidden, "latent_dim": args.latent_dim},
         verify=not args.no_verify, seed=args.seed, log=lambda line: print(line, flush=True))
+    print("\n".join(report_lines(result, where=where, epochs=args.epochs, hidden=args.hidden)))
+    return EXIT_FOUND if result.found else EXIT_NOT_FOUND
+
+
+def report_lines(result, *, where: str, epochs: int, hidden: int) -> list[str]:
+    """What the check prints after its search (:class:`hierloco.components.expert_tuning.TuningResult`): the
+    tracking table of the candidate the result is about (verified numbers under "verified", the screening's under
+    "screened"), then either what was found (which change made the difference, the YAML lines to paste, the
+    recipe overrides to paste) or what limits it, labelled verified or screened, and its parameters."""
     params = result.params
     if params is None:
-        print(f"not found in {result.seconds:.0f} s:")
-        for line in result.limits:
-            print(f"  - {line}")
-        return EXIT_NOT_FOUND
-    verified = result.verified
-    shown = result.verifications[-1] if result.verifications else None
+        return [f"not found in {result.seconds:.0f} s:", *(f"  - {line}" for line in result.limits)]
+    lines = []
+    shown = result.shown  # the verification the parameters are from, when one ran
+    label = shown.candidate.label if shown is not None else result.best.candidate.label
     if shown is not None and shown.report is not None:
-        print(f"\ntracking of the {shown.report.num_experts} experts verified ({shown.candidate.label}):")
-        print("\n".join(tracking_table(shown.report.axes)))
-        if shown.replayed_fraction is not None:
-            print(f"experts' own targets replayed open loop: {shown.replayed_fraction:.0%} within 0.05 m/s")
+        lines += ["", f"verified: tracking of the {shown.report.num_experts} experts of the experts stage ({label}):",
+                  *tracking_table(shown.report.axes),
+                  f"verified: the experts' own targets replayed open loop: {shown.replayed_fraction:.0%} within "
+                  "0.05 m/s"]
         if shown.reproduced_fraction is not None:
-            print(f"gait policy: reproduces {shown.reproduced_fraction:.0%} of the experts within 0.05 m/s in "
-                  f"simulation (need {result.min_reproduced_fraction:.0%})")
+            lines.append(f"verified: the gait policy reproduces {shown.reproduced_fraction:.0%} of the experts within "
+                         f"0.05 m/s in simulation (need {result.min_reproduced_fraction:.0%})")
     elif result.best is not None and result.best.axes:
-        print(f"\ntracking of the {result.best.num_commands} screened experts ({result.best.candidate.label}):")
-        print("\n".join(tracking_table(result.best.axes)))
-        print(f"experts' own targets replayed open loop: {result.best.replayed_fraction:.0%} within 0.05 m/s")
+        lines += ["", f"screened (not verified): tracking of the {result.best.num_commands} screened experts "
+                      f"({result.best.candidate.label}):", *tracking_table(result.best.axes),
+                  f"screened (not verified): the experts' own targets replayed open loop: "
+                  f"{result.best.replayed_fraction:.0%} within 0.05 m/s"]
     changed = params.changed(result.reference)
-    lines = params.yaml_lines(robot, only=changed)
-    if result.found:
-        what = "verified" if verified is not None else "screened only (--no-verify)"
-        same = "" if changed else "; the description's own parameters walk, these lines pin the derived values"
-        print(f"\nfound in {result.seconds:.0f} s ({what}{same}); paste into {where} (replacing these keys):")
-        print("\n".join(lines))
-        adapted = verified.policy_adapted if verified is not None else None
-        if adapted is not None:
-            overrides = " ".join(f"policy.{key}={value:g}" for key, value in adapted["overrides"].items())
-            print(f"# and train the gait policy with the recipe overrides {overrides} (the configured "
-                  f"{args.epochs} epochs of {args.hidden} units reproduce "
-                  f"{verified.policy_attempts[0]['reproduced_fraction']:.0%} of the experts, this fit "
-                  f"{adapted['reproduced_fraction']:.0%})")
-        return EXIT_FOUND
-    print(f"\nnot found in {result.seconds:.0f} s; the best candidate: {result.best.candidate.label}")
-    print("what limits it:")
-    for line in result.limits:
-        print(f"  - {line}")
-    print("its parameters:")
-    print("\n".join(lines))
-    return EXIT_NOT_FOUND
+    yaml_lines = params.yaml_lines(result.robot, only=changed)
+    if not result.found:
+        what = "verified" if shown is not None else "screened"
+        lines += ["", f"not found in {result.seconds:.0f} s; the candidate {what}: {label}", "what limits it:",
+                  *(f"  - {line}" for line in result.limits), "its parameters:", *yaml_lines]
+        return lines
+    what = "verified" if result.verified is not None else "screened only (--no-verify)"
+    same = "" if changed else "; the description's own parameters walk, these lines pin the derived values"
+    lines += ["", f"found in {result.seconds:.0f} s ({what}{same})"]
+    if result.differences:
+        needed = [d.name for d in result.differences if d.needed]
+        margin = [d.name for d in result.differences if d.margin]
+        lines.append("what made the difference (screened, each change undone alone, the others kept): "
+                     + (", ".join(needed) if needed else "no single change")
+                     + (f"; more margin: {', '.join(margin)}" if margin else ""))
+        lines += [f"  - {d.describe()}" for d in result.differences]
+    lines += [f"paste into {where} (replacing these keys):", *yaml_lines]
+    overrides = result.override_lines()
+    if overrides:
+        fits = result.verified.policy_attempts
+        first, last = fits[0]["reproduced_fraction"], fits[-1]["reproduced_fraction"]
+        lines += [f"and train the gait policy with these overrides on the recipe's command line (experts.tune=true "
+                  f"applies them): the configured {epochs} epochs of {hidden} units reproduce {first:.0%} of the "
+                  f"experts, this fit {last:.0%}", *overrides]
+    return lines
 
 
-__all__ = ["main", "tracking_table"]
+__all__ = ["main", "report_lines", "tracking_table"]
 
 
 if __name__ == "__main__":
