@@ -599,12 +599,27 @@ def ray_session(address: str | None = None):
             _set_sigterm(handler)
         yield
     finally:
-        if ray.is_initialized():
-            ray.shutdown()
+        ray.shutdown()  # also stops the processes of a ray.init that a signal cut short (not yet initialized)
         constants.RAY_DISABLE_FAILURE_SIGNAL_HANDLER = failure_handler
         _set_sigterm(handler)
         if temp_dir is not None:
-            shutil.rmtree(temp_dir, ignore_errors=True)
+            _remove_folder(temp_dir)
+
+
+def _remove_folder(path: str, patience_s: float = 10.0) -> None:
+    """Removes the folder this process made, again while the processes it stopped still write their last files
+    into it (a worker's log may recreate it): done once it stays gone for a second."""
+    deadline = time.monotonic() + patience_s
+    gone_since = None
+    while time.monotonic() < deadline:
+        if os.path.exists(path):
+            shutil.rmtree(path, ignore_errors=True)
+            gone_since = None
+        elif gone_since is None:
+            gone_since = time.monotonic()
+        elif time.monotonic() - gone_since >= 1.0:
+            return
+        time.sleep(0.2)
 
 
 def _connect(address: str) -> None:

@@ -145,7 +145,7 @@ def test_a_study_ignores_a_stale_cluster_file_and_stops_in_one_line_on_sigterm(t
     # as Ray's processes are up and the study joins them
     code, err = sigterm(lambda: list(private_tmp.glob("hierloco-ray-*/session_2*/sockets/raylet")))
     assert code == 130 and err.splitlines() == [INTERRUPTED], (code, err[-3000:])
-    wait_until(lambda: not list(private_tmp.glob("hierloco-ray-*")), 30, "the study's Ray folder removed")
+    wait_until(lambda: not list(private_tmp.glob("hierloco-ray-*")), 30, "the study's Ray folder removed " + str([str(p) for p in private_tmp.glob("hierloco-ray-*/**/*")][:30]))
 
     # while its job runs
     study = subprocess.Popen(command, cwd=tmp_path, env=environment(private_tmp), stdout=subprocess.PIPE,
