@@ -31,7 +31,7 @@ export WANDB_MODE=${WANDB_MODE:-offline}
 cmd=${1:-main}
 shift || true
 case "$cmd" in
-  main)  exec .venv/bin/python recipes/lat/train.py preset=small "$@" ;;
+  main)  exec .venv/bin/hierloco train lat preset=small "$@" ;;
   demo)  exec .venv/bin/python -m hierloco.demo "$@" ;;
   test)  exec .venv/bin/python -m pytest -q "$@" ;;
   bench) exec .venv/bin/python benchmarks/run_all.py "$@" ;;

@@ -207,7 +207,7 @@ def sac_task_section(lat_dir: Path, device, threads: int, small: bool) -> str:
     from hierloco.components.sac import SACAgent, train_sac
     from hierloco.envs.tasks import GoalReaching
     from hierloco.envs.transforms import GoalObservation
-    from recipes.sac.utils import task_env
+    from hierloco.recipes.sac.utils import task_env
 
     frames, robots, hidden, batch = (64, 8, 32, 32) if small else (10_000, 16, 512, 512)
     trained = TrainedGaitPolicy.load(lat_dir / "gait_policy.pt")

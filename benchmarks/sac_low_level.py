@@ -27,7 +27,7 @@ from hierloco.components.sac_low_level import (
     train_sac_low_level,
 )
 from hierloco.io import write_text
-from recipes.sac_sac.report import learning_curve_markdown, plot_learning_curve, tracking_markdown
+from hierloco.recipes.sac_sac.report import learning_curve_markdown, plot_learning_curve, tracking_markdown
 
 
 def parse_args(argv=None) -> argparse.Namespace:

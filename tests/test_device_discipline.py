@@ -162,7 +162,7 @@ def test_sac_training_and_evaluation_name_their_devices(tiny_lat):
     from hierloco.envs.latent_env import LatentActionEnv
     from hierloco.envs.tasks import make_task
     from hierloco.envs.transforms import GoalObservation
-    from recipes.sac.utils import task_env
+    from hierloco.recipes.sac.utils import task_env
 
     low_level = tiny_lat["low_level"]
     task = make_task("goal_reaching", **TASKS["goal_reaching"])

@@ -3,7 +3,7 @@
 A recipe's ``train.py`` is its method body over an open run::
 
     from hierloco.pipeline import recipe_main
-    from recipes.lat import utils
+    from hierloco.recipes.lat import utils
 
     @recipe_main(utils)              # config.yaml beside utils.py; utils.plan / checks / manifest / METHOD
     def main(run):
@@ -128,6 +128,8 @@ def recipe_main(utils: ModuleType, config_name: str = "config") -> Callable:
 
             from hierloco.pipeline.studies import die_with_parent
 
+            if information_only(sys.argv[1:]):  # --help, --cfg job: the config alone, no run
+                sys.exit(describe_config(folder, f"hierloco train {utils.METHOD}", sys.argv[1:], config_name))
             die_with_parent()  # a job of a study ends with the study's worker
             sigterm_as_interrupt()
             try:
@@ -149,4 +151,70 @@ def recipe_main(utils: ModuleType, config_name: str = "config") -> Callable:
     return decorate
 
 
-__all__ = ["check_environment", "disk_full", "one_line_errors", "recipe_main", "report_error"]
+# Hydra's flags that only describe the config: answered without importing the recipe (torch, MuJoCo) or running it
+INFORMATION_FLAGS = ("--help", "-h", "--hydra-help", "--cfg", "-c", "--info", "-i", "--shell-completion", "-sc")
+
+
+def information_only(arguments: list[str]) -> bool:
+    """Whether ``arguments`` ask Hydra for information only (help, the composed config), not for a run."""
+    return any(a in INFORMATION_FLAGS or a.startswith(("--cfg=", "--info=")) for a in arguments)
+
+
+def config_groups(folder, config_name: str = "config") -> dict[str, list[str]]:
+    """The config groups a recipe composes from (its own folder's and the shared ``hierloco/recipes/conf``), each
+    with its options: ``{"planner": ["cem", ...], ...}``."""
+    from hierloco.recipes import conf
+
+    groups: dict[str, set[str]] = {}
+    for root in (Path(folder), Path(next(iter(conf.__path__)))):
+        for path in root.rglob("*.yaml"):
+            group = path.parent.relative_to(root).as_posix()
+            if path.parent != root and "__pycache__" not in group:
+                groups.setdefault(group, set()).add(path.stem)
+    return {group: sorted(options) for group, options in sorted(groups.items())}
+
+
+def help_text(folder, name: str, config_name: str = "config") -> str:
+    """``--help`` of a recipe: what it is (its config's opening comment), how to override, its config groups."""
+    lines = (Path(folder) / f"{config_name}.yaml").read_text().splitlines()
+    about = [line.lstrip("# ").rstrip() for line in lines[:next((i for i, l in enumerate(lines)
+                                                                  if not l.startswith("#")), 0)]]
+    text = [f"{name}: " + (about[0] if about else ""), *about[1:], "",
+            f"usage: {name} [group=option ...] [key=value ...] [-m for a sweep over comma-separated values]",
+            "  (Hydra's override grammar; --cfg job prints the composed config, --info how it was composed)", "",
+            "config groups (group=option):"]
+    text += [f"  {group}: {', '.join(options)}" for group, options in config_groups(folder, config_name).items()]
+    return "\n".join(text) + "\n\nconfig (key=value overrides any of it):\n"
+
+
+def describe_config(folder, name: str, arguments: list[str], config_name: str = "config") -> int:
+    """Hydra's information flags (``--help``, ``--cfg job``, ``--info``, ...) for the recipe in ``folder``: its
+    config composed with ``arguments``, without importing the recipe (torch, MuJoCo), so they answer in about a
+    second. Returns the exit status."""
+    import hydra
+
+    @hydra.main(config_path=str(folder), config_name=config_name, version_base=None)
+    def show(cfg):  # Hydra answers the information flags itself and never calls this
+        return None
+
+    os.environ.setdefault("HYDRA_FULL_ERROR", "1")
+    from hydra.errors import HydraException
+
+    if "--help" in arguments or "-h" in arguments:
+        print(help_text(folder, name, config_name), end="")
+        arguments = ["--cfg", "job", *[a for a in arguments if a not in ("--help", "-h")]]
+    saved = sys.argv
+    sys.argv = [name, *arguments]
+    try:
+        show()
+    except SystemExit as done:
+        return done.code if isinstance(done.code, int) else (0 if done.code is None else 1)
+    except HydraException as error:
+        report_error(error)
+        return EXIT_USER_ERROR
+    finally:
+        sys.argv = saved
+    return 0
+
+
+__all__ = ["INFORMATION_FLAGS", "check_environment", "config_groups", "describe_config", "help_text", "information_only", "disk_full", "one_line_errors", "recipe_main", "report_error"]

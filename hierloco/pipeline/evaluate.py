@@ -1,4 +1,4 @@
-"""Evaluate a trained run on any tasks or planners: ``python recipes/evaluate.py run_dir=... [overrides]``.
+"""Evaluate a trained run on any tasks or planners: ``hierloco evaluate run_dir=... [overrides]``.
 
 One entry point serves every method: the run's ``run.json`` names its method (the method registry,
 :mod:`hierloco.pipeline.methods`, finds its recipe). The run's own config (``<run_dir>/config.yaml``) is the base;
@@ -17,9 +17,9 @@ config (``planner.name: some.module:Class``, a task's ``task:``, ``dynamics.mode
 is (``docs/pipeline.md``).
 
 Example:
-    python recipes/lat/train.py preset=small run_dir=runs/a1
-    python recipes/evaluate.py run_dir=runs/a1 '+eval.tasks.goal_reaching_5m={task: goal_reaching, radius: 5}'
-    python recipes/evaluate.py -m run_dir=runs/a1 planner.name=random_shooting,cem
+    hierloco train lat preset=small run_dir=runs/a1
+    hierloco evaluate run_dir=runs/a1 '+eval.tasks.goal_reaching_5m={task: goal_reaching, radius: 5}'
+    hierloco evaluate -m run_dir=runs/a1 planner.name=random_shooting,cem
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ from pathlib import Path
 from hierloco.pipeline.errors import EXIT_INTERRUPTED, EXIT_USER_ERROR, ConfigError, one_line
 
 EVALUATION_KEYS = ("eval", "planner", "settings", "nthread", "device", "progress", "logger")
-USAGE = ("usage: python recipes/evaluate.py [-m] run_dir=<trained run> [name=<label>] [trust_imports=<pkg.mod:Class>,"
+USAGE = ("usage: hierloco evaluate [-m] run_dir=<trained run> [name=<label>] [trust_imports=<pkg.mod:Class>,"
          "...] [eval/planner overrides]")
 NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.=,-]*")
 IMPORT_PATH = re.compile(r"[A-Za-z_][\w.]*:[A-Za-z_][\w.]*")  # package.module:Class, as typed in an override

@@ -508,10 +508,12 @@ _SOCKET_ROOM = 66  # what Ray adds to its temporary folder for its sockets (sess
 
 
 def project_root() -> Path:
-    """The project's folder (``hierloco/``, ``recipes/``): on a cluster, every job runs in a copy of it."""
-    import recipes
+    """The project's folder (the checkout holding ``hierloco/``; for an installed package, the working directory):
+    on a cluster, every job runs in a copy of it."""
+    import hierloco
 
-    return Path(next(iter(recipes.__path__))).resolve().parent
+    checkout = Path(next(iter(hierloco.__path__))).resolve().parent
+    return checkout if (checkout / "pyproject.toml").is_file() else Path.cwd().resolve()
 
 
 def cluster_runtime_env() -> dict:

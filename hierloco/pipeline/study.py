@@ -38,7 +38,9 @@ def study_main(script_file: str, config_name: str = "config") -> Callable:
     folder = str(Path(script_file).resolve().parent)
 
     def decorate(main: Callable) -> Callable:
-        from hierloco.pipeline.entry import check_environment, one_line_errors, report_error, sigterm_as_interrupt
+        from hierloco.pipeline.entry import (
+            check_environment, describe_config, information_only, one_line_errors, report_error, sigterm_as_interrupt,
+        )
 
         @hydra.main(config_path=folder, config_name=config_name, version_base=None)
         @functools.wraps(main)
@@ -54,6 +56,8 @@ def study_main(script_file: str, config_name: str = "config") -> Callable:
             os.environ.setdefault("HYDRA_FULL_ERROR", "1")
             from hydra.errors import HydraException
 
+            if information_only(sys.argv[1:]):  # --help, --cfg job: the config alone, no jobs
+                sys.exit(describe_config(folder, f"hierloco study {Path(folder).name}", sys.argv[1:], config_name))
             sigterm_as_interrupt()
             try:
                 return task()

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from recipes.ablations.paper_check import check_claims, load_causes, paper_check_markdown, significant
+from hierloco.recipes.ablations.paper_check import check_claims, load_causes, paper_check_markdown, significant
 
 
 def trials(costs: dict, task="goal_reaching"):

@@ -109,7 +109,7 @@ def adverse_config(*overrides):
 
 
 def test_profile_overrides_reach_only_that_profiles_runs_of_that_method():
-    from recipes.adverse import run
+    from hierloco.recipes.adverse import run
 
     cfg = adverse_config("robots=[a1]", "seeds=[0]", "profiles=[own,stiff]", "samples=[]")
     main, extra = run.fault_jobs(cfg, run.check(cfg))
@@ -121,7 +121,7 @@ def test_profile_overrides_reach_only_that_profiles_runs_of_that_method():
 def test_bad_profile_overrides_are_refused_before_any_job():
     import pytest
 
-    from recipes.adverse import run
+    from hierloco.recipes.adverse import run
     from hierloco.pipeline.config import ConfigError
 
     with pytest.raises(ConfigError, match="unknown robot profile 'sticky' in profile_overrides"):
@@ -131,7 +131,7 @@ def test_bad_profile_overrides_are_refused_before_any_job():
 
 
 def test_sample_counts_build_the_low_level_once_when_the_paper_run_is_not_on_disk(tmp_path, monkeypatch):
-    from recipes.adverse import run
+    from hierloco.recipes.adverse import run
     from hierloco.pipeline import studies
 
     monkeypatch.chdir(tmp_path)

@@ -98,7 +98,7 @@ def test_a_killed_sac_high_level_resumes_from_its_checkpoint(tmp_path):
     from hierloco.components.low_level import CommandLowLevel
     from hierloco.components.sac import SACAgent
     from hierloco.pipeline.rundir import RunDirectory
-    from recipes.sac.utils import train_high_level
+    from hierloco.recipes.sac.utils import train_high_level
 
     params = {"seed": 0, "device": "cpu", "task_name": "velocity_tracking", "task": {}, "total_frames": 64,
               "init_random_frames": 16, "num_robots": 8, "updates_per_frame": 0.25, "batch_size": 16,

@@ -175,7 +175,7 @@ def compare_config(*overrides):
 
 
 def test_method_seeds_give_a_method_its_own_seeds():
-    from recipes.compare import run
+    from hierloco.recipes.compare import run
 
     cfg = compare_config("methods=[lat,sac]", "robots=[a1]", "seeds=[0,1,2]", "+method_seeds.sac=[0]")
     planned = run.jobs(cfg, run.check(cfg))
@@ -195,7 +195,7 @@ def test_method_seeds_give_a_method_its_own_seeds():
 ])
 def test_bad_method_seeds_are_refused_before_any_job(method_seeds, message):
     from hierloco.pipeline.config import ConfigError
-    from recipes.compare import run
+    from hierloco.recipes.compare import run
 
     cfg = compare_config("methods=[lat,sac]", "robots=[a1]", f"+method_seeds.{method_seeds}")
     with pytest.raises(ConfigError, match=message.replace("[", r"\[")):
@@ -204,7 +204,7 @@ def test_bad_method_seeds_are_refused_before_any_job(method_seeds, message):
 
 def test_a_bad_causes_file_is_refused_before_any_job(tmp_path):
     from hierloco.pipeline.config import ConfigError
-    from recipes.compare import run
+    from hierloco.recipes.compare import run
 
     causes = tmp_path / "causes.yaml"
     causes.write_text("- {claims: [lat_is_great], cause: because}")
@@ -220,7 +220,7 @@ def test_names_show_a_variant_under_the_methods_name_and_refuse_two_under_one():
     """``names`` puts SAC-SAC at the paper's 2 x 512 in the tables and claims as ``sac_sac`` (the 2 x 256 runs as a
     labelled variant); two methods under one name would be pooled as one, so that is refused before any job."""
     from hierloco.pipeline.config import ConfigError
-    from recipes.compare import run
+    from hierloco.recipes.compare import run
 
     cfg = compare_config("methods=[sac_sac,sac_sac_2x512]", "robots=[a1]")  # the recipe's own names
     assert dict(cfg.names) == {"sac_sac_2x512": "sac_sac", "sac_sac": "sac_sac_2x256"}

@@ -22,7 +22,7 @@ no_gpu = pytest.mark.skipif(torch.cuda.is_available(), reason="auto resolves to 
 
 def plan(recipe: str, *overrides: str) -> dict:
     cfg = compose_recipe(recipe, ["preset=tiny", *overrides])
-    utils = importlib.import_module(f"recipes.{recipe}.utils")
+    utils = importlib.import_module(f"hierloco.recipes.{recipe}.utils")
     return {stage.name: stage for stage in utils.plan(cfg, prepare(cfg, utils.checks)).stages()}
 
 
@@ -82,7 +82,7 @@ def test_bad_scoring_options_are_named():
 
 
 def test_the_sac_sac_low_level_keys_a_device_only_off_the_cpu():
-    from recipes.sac_sac.utils import low_level_device
+    from hierloco.recipes.sac_sac.utils import low_level_device
 
     cfg = compose_recipe("sac_sac", ["preset=tiny"])
     with open_dict(cfg):
@@ -133,7 +133,7 @@ def test_a_run_evaluated_on_another_device_keeps_its_trained_stages(recipe):
     device check, which needs the GPU."""
     from hierloco.envs.robots import get_robot
 
-    utils = importlib.import_module(f"recipes.{recipe}.utils")
+    utils = importlib.import_module(f"hierloco.recipes.{recipe}.utils")
     cpu = plan(recipe, "device=cpu")
     cfg = compose_recipe(recipe, ["preset=tiny", "device=cuda", "+trained_device=cpu"])
     elsewhere = {stage.name: stage for stage in utils.plan(cfg, get_robot("a1")).stages()}

@@ -5,7 +5,7 @@ set against its error on fresh transitions in every setting."""
 import pytest
 
 from hierloco.results import read_csv
-from recipes.ensemble.run import calibration_markdown, verdict_table
+from hierloco.recipes.ensemble.run import calibration_markdown, verdict_table
 from tests.runner import run_in_process, run_subprocess
 
 

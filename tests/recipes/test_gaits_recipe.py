@@ -5,7 +5,7 @@ import pytest
 
 from hierloco.components.expert_library import ExpertLibrary
 from hierloco.results import read_csv
-from recipes.gaits.run import (
+from hierloco.recipes.gaits.run import (
     action_speeds, decide_needed_gait, needed_at, needed_gait_shares, profile_markdown, segments,
 )
 from tests.recipes.test_device_keys import changed, plan

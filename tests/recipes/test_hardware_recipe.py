@@ -46,7 +46,7 @@ def test_each_gap_gets_its_own_run_directories():
     from omegaconf import OmegaConf
 
     from hierloco.envs.robots import get_robot
-    from recipes.hardware.run import jobs
+    from hierloco.recipes.hardware.run import jobs
 
     cfg = OmegaConf.create({"methods": ["lat"], "variants": {}, "seeds": [0], "preset_name": "paper",
                             "num_experts": 20, "num_transitions": 2000, "overrides": []})

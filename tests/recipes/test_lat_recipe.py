@@ -145,7 +145,7 @@ def test_evaluate_adds_a_task_without_touching_training(tiny_run, tmp_path):
 def test_a_traced_evaluation_replays_the_same_closed_loop_and_scores_the_model_on_its_plans(tiny_run, tmp_path):
     import numpy as np
 
-    from recipes.adverse import trace
+    from hierloco.recipes.adverse import trace
 
     out = trace.trace(tiny_run[0], "legs_disabled", "velocity_tracking")
     assert out["normalized_cost"] == pytest.approx(out["recorded_normalized_cost"], rel=1e-6)  # the same episodes

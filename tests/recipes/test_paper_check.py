@@ -2,7 +2,7 @@
 
 import pytest
 
-from recipes.compare.paper_check import check_claims, load_causes, paper_check_markdown, seed_means
+from hierloco.recipes.compare.paper_check import check_claims, load_causes, paper_check_markdown, seed_means
 
 
 def rows(costs: dict, setting="normal", task="velocity_tracking", robot="a1"):
@@ -188,8 +188,8 @@ def test_a_malformed_causes_file_is_refused_with_the_problem_named(tmp_path, tex
 def test_the_docstring_examples_run():
     import doctest
 
-    import recipes.ablations.paper_check
-    import recipes.compare.paper_check
+    import hierloco.recipes.ablations.paper_check
+    import hierloco.recipes.compare.paper_check
 
-    for module in (recipes.compare.paper_check, recipes.ablations.paper_check):
+    for module in (hierloco.recipes.compare.paper_check, hierloco.recipes.ablations.paper_check):
         assert doctest.testmod(module).failed == 0

@@ -4,7 +4,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from recipes.sac_sac.report import budget_from_curve, budget_sentence
+from hierloco.recipes.sac_sac.report import budget_from_curve, budget_sentence
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -6,7 +6,7 @@ import shutil
 import pytest
 
 from hierloco.results import read_csv
-from recipes.sample_efficiency.run import check_claims, samples_in_all
+from hierloco.recipes.sample_efficiency.run import check_claims, samples_in_all
 from tests.runner import ROOT, run_in_process, run_subprocess
 
 COMPARE_RECORDS = ROOT / "results" / "compare_full" / "records"

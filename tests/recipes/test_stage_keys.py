@@ -34,7 +34,7 @@ def config(recipe: str):
 
 
 def plan_digests(recipe: str, cfg) -> dict[str, str]:
-    utils = importlib.import_module(f"recipes.{recipe}.utils")
+    utils = importlib.import_module(f"hierloco.recipes.{recipe}.utils")
     robot = prepare(cfg, utils.checks)
     return {stage.name: stage.digest for stage in utils.plan(cfg, robot)}
 
@@ -130,7 +130,7 @@ def test_the_hardware_settings_keys():
     cfg = config("lat")
     with open_dict(cfg):
         cfg.settings = ["hardware_unadapted", "hardware"]
-    utils = importlib.import_module("recipes.lat.utils")
+    utils = importlib.import_module("hierloco.recipes.lat.utils")
     plan = {stage.name: stage for stage in utils.plan(cfg, prepare(cfg, utils.checks))}
     assert "dynamics_model_normal" in plan and "evaluation_normal_goal_reaching" not in plan
     assert not any(name.startswith("dynamics_data_hardware_unadapted") for name in plan)

@@ -51,7 +51,7 @@ def test_tune_ik_tiny(tmp_path):
 def test_the_rule_keeps_the_incumbent_unless_a_candidate_is_established_better():
     import numpy as np
 
-    from recipes.tune.run import choose
+    from hierloco.recipes.tune.run import choose
 
     incumbent = np.array([0.30, 0.32, 0.31])
     chosen, decisions = choose({"paper": incumbent, "lower": np.array([0.29, 0.33, 0.30])}, "paper")

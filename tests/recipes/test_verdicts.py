@@ -1,7 +1,7 @@
 """recipes.verdicts on a small results tree of job records: each study's verdicts, the paper's claims, the fragile
 ones, regenerated (not hand-written) and checked for staleness."""
 
-from recipes.verdicts import load, main, pages
+from hierloco.recipes.verdicts import load, main, pages
 from tests.test_evidence import write_record
 
 TASKS = ("velocity_tracking", "goal_reaching", "trajectory_tracking")
@@ -42,7 +42,7 @@ def test_pages_decide_pool_and_name_what_is_not_measured(tmp_path):
     assert set(written) == {"compare_full/verdicts.md", "adverse/verdicts.md", "paper_check.md",
                             "fragile_claims.md"}
     study = written["compare_full/verdicts.md"]
-    assert "`python -m recipes.verdicts`" in study and "| LIB is worse than LAT at velocity tracking | a1 |" in study
+    assert "`hierloco verdicts`" in study and "| LIB is worse than LAT at velocity tracking | a1 |" in study
     paper = written["paper_check.md"]
     damaged = next(line for line in paper.splitlines() if line.startswith("| a1 | legs_disabled | velocity_tracking |")
                    and "LAT beats IK (the IK tuned" in line)

@@ -128,7 +128,7 @@ def test_yaml_aliases_that_expand_to_billions_of_values_are_one_line_in_seconds(
     """A 1.6 kB robot YAML, or a received run's ``config.yaml``, whose nested aliases hold 9**9 values: refused in
     one line naming the file within seconds (it hung for minutes while a message formatted the expanded value),
     and before any work."""
-    import recipes.lat.utils  # noqa: F401  (the recipe's imports, outside the time bound)
+    import hierloco.recipes.lat.utils  # noqa: F401  (the recipe's imports, outside the time bound)
 
     if where == "robot description":
         robot = tmp_path / "robot.yaml"

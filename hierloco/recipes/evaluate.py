@@ -1,0 +1,12 @@
+"""Evaluate any trained run on more tasks or other planners, training nothing (``hierloco/pipeline/evaluate.py``).
+
+    hierloco evaluate run_dir=outputs/lat/paper/a1_seed0 \
+        '+eval.tasks.goal_reaching_5m={task: goal_reaching, radius: 5}'
+    hierloco evaluate -m run_dir=outputs/lat/paper/a1_seed0 planner.num_candidates=1000,2000,4000
+"""
+
+import hierloco  # noqa: F401  (first: the rendering backend is chosen before anything loads MuJoCo)
+from hierloco.pipeline.evaluate import evaluate_main
+
+if __name__ == "__main__":
+    evaluate_main()
