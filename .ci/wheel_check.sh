@@ -21,7 +21,7 @@ export MUJOCO_GL=${MUJOCO_GL:-disable} WANDB_MODE=offline
 "$work/venv/bin/hierloco" train lat --help > /dev/null
 "$work/venv/bin/hierloco" train lat preset=tiny progress=false run_dir=runs/lat_tiny logger.backends=[csv] > train.log
 test -f runs/lat_tiny/results.csv
-"$work/venv/bin/hierloco" study compare preset=tiny progress=false 'methods=[lat]' 'robots=[a1]' 'seeds=[0]' \
+"$work/venv/bin/hierloco" study compare preset=tiny 'methods=[lat]' 'robots=[a1]' 'seeds=[0]' \
   out_dir=study > study.log
 test -f study/comparison.md
 echo "wheel check: the wheel's hierloco ran a tiny LAT run and a tiny study ($(wc -l < study/comparison.md) table lines)"
