@@ -4,8 +4,9 @@ A study keeps each finished job's verified *record* (its rows, its stage keys, w
 :mod:`hierloco.pipeline.records`, ``docs/statistics.md``). This module reads records, and per-episode tables without records,
 into :class:`Run` objects, one per job, setting and task, each labelled with what was run:
 
-- ``method``: the recipe of the job's signature, or its study name when the overrides make it a variant
-  (:data:`VARIANTS`: ``ik`` with ``controller.footstep_law=plain`` is ``ik_plain``);
+- ``method``: the recipe of the job's signature, or its study name when the overrides make it a variant (the
+  ``variants`` a reader is given, as a study's config declares them: ``ik_plain: {recipe: ik, overrides:
+  [controller.footstep_law=plain]}`` names IK with the plain footstep law ``ik_plain``);
 - ``robot``, ``setting``, ``task``, ``seed`` from the rows, ``profile`` from ``robot_profile=`` (default ``own``);
 - ``factors``: the sizes the ablations and the sample-efficiency study vary (``latent_dim``, ``num_experts``,
   ``num_transitions``: CoM transitions of the run's setting, ``high_level_frames``: the environment steps the task's
@@ -50,11 +51,6 @@ from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
-# study names of recipe variants: name -> (recipe, overrides that make it)
-VARIANTS: dict[str, tuple[str, tuple[str, ...]]] = {
-    "ik_plain": ("ik", ("controller.footstep_law=plain",)),
-    "sac_sac_2x512": ("sac_sac", ("low_level.hidden=512",)),   # SAC-SAC's low level at the paper's 2 x 512
-}
 # overrides that say where and how a job ran, not what it is
 BOOKKEEPING = ("preset", "robot", "seed", "progress", "settings", "eval.generalization", "eval.videos", "nthread",
                "robot_profile")
@@ -113,17 +109,23 @@ def _float(value) -> float:
         return math.nan
 
 
-def method_of(signature: Mapping, variants: Mapping = VARIANTS) -> str:
-    """The study name of a job: its recipe, or the variant whose overrides it has.
+def method_of(signature: Mapping, variants: Mapping | None = None) -> str:
+    """The study name of a job: its recipe, or the variant whose overrides it has (``variants``: name ->
+    ``{"recipe": ..., "overrides": [...]}``, as a study's config declares them).
 
-        >>> method_of({"method": "ik", "overrides": ["seed=1", "controller.footstep_law=plain"]})
+        >>> plain = {"ik_plain": {"recipe": "ik", "overrides": ["controller.footstep_law=plain"]}}
+        >>> method_of({"method": "ik", "overrides": ["seed=1", "controller.footstep_law=plain"]}, plain)
         'ik_plain'
     """
     overrides = set(signature.get("overrides", []))
-    for name, (recipe, needed) in variants.items():
-        if signature.get("method") == recipe and set(needed) <= overrides:
+    for name, variant in (variants or {}).items():
+        if signature.get("method") == variant["recipe"] and set(variant.get("overrides", [])) <= overrides:
             return name
     return str(signature.get("method", ""))
+
+
+def _variant_overrides(variants: Mapping | None) -> set[str]:
+    return {o for variant in (variants or {}).values() for o in variant.get("overrides", [])}
 
 
 def _override(overrides: Sequence[str], name: str, default=None):
@@ -193,10 +195,11 @@ def job_compute(record: str | os.PathLike) -> tuple[float, int, str]:
     return seconds / 60.0, threads, (cpus[0] if cpus else "")
 
 
-def read_records(root: str | os.PathLike, *, folder: str = "", variants: Mapping = VARIANTS) -> list[Run]:
+def read_records(root: str | os.PathLike, *, folder: str = "", variants: Mapping | None = None) -> list[Run]:
     """Every finished job's runs under ``root`` (a study's records directory: one verified ``record.json`` per job,
-    at any depth; :mod:`hierloco.pipeline.records`), labelled as in the module doc; ``folder`` names the study they
-    belong to. A record of a finding has no runs: see :func:`read_findings`. An edited record raises."""
+    at any depth; :mod:`hierloco.pipeline.records`), labelled as in the module doc (``variants``: :func:`method_of`);
+    ``folder`` names the study they belong to. A record of a finding has no runs: see :func:`read_findings`. An
+    edited record raises."""
     from hierloco.pipeline.records import RECORD
 
     runs = []
@@ -220,7 +223,7 @@ def read_records(root: str | os.PathLike, *, folder: str = "", variants: Mapping
             if bound in experts.get("params", {}):
                 factors[bound] = tuple(experts["params"][bound])
         options = tuple(sorted(o for o in overrides if o.partition("=")[0].lstrip("+") not in BOOKKEEPING
-                               and not any(o in needed for _, needed in variants.values())))
+                               and o not in _variant_overrides(variants)))
 
         def per_group(setting, task, stages=stages, builds=builds, factors=factors, job_cpu=job_cpu):
             prefix = f"evaluation/{setting}/{task}-"
@@ -242,7 +245,7 @@ def read_records(root: str | os.PathLike, *, folder: str = "", variants: Mapping
     return runs
 
 
-def read_findings(root: str | os.PathLike, *, variants: Mapping = VARIANTS) -> list[dict]:
+def read_findings(root: str | os.PathLike, *, variants: Mapping | None = None) -> list[dict]:
     """The jobs under ``root`` that ended in a finding about their setting: per record its ``method``, ``robot``,
     ``seed``, ``profile``, ``settings``, the ``stage`` it stopped in and the ``error``."""
     from hierloco.pipeline.records import RECORD
@@ -263,7 +266,8 @@ def read_findings(root: str | os.PathLike, *, variants: Mapping = VARIANTS) -> l
     return found
 
 
-def read_stage_reports(root: str | os.PathLike, stage: str, *, variants: Mapping = VARIANTS) -> list[dict]:
+def read_stage_reports(root: str | os.PathLike, stage: str, *,
+                       variants: Mapping | None = None) -> list[dict]:
     """What stage ``stage`` reported in every finished job under ``root`` whose plan has it (a verified record
     holding that stage's key and its report, e.g. ``latent_continuity``): per job its ``method``, ``robot``,
     ``seed`` and ``record``, with the report's fields. An edited record raises."""
@@ -388,5 +392,5 @@ def rows_of(runs: Iterable[Run], *, method=None) -> list[dict]:
     return rows
 
 
-__all__ = ["BOOKKEEPING", "FACTORS", "Run", "VARIANTS", "adopt_configs", "distinct", "job_compute", "method_of",
+__all__ = ["BOOKKEEPING", "FACTORS", "Run", "adopt_configs", "distinct", "job_compute", "method_of",
            "read_findings", "read_records", "read_table", "replicates", "rows_of", "same_run", "seed_values", "select"]

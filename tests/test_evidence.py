@@ -9,6 +9,9 @@ import pytest
 from hierloco.evidence import (adopt_configs, distinct, job_compute, read_findings, read_records, read_table,
                                replicates, rows_of, seed_values, select)
 
+# the variants the runs below are of, as a study's config declares them (recipes/compare/config.yaml)
+VARIANTS = {"ik_plain": {"recipe": "ik", "overrides": ["controller.footstep_law=plain"]},
+            "sac_sac_2x512": {"recipe": "sac_sac", "overrides": ["low_level.hidden=512"]}}
 COLUMNS = "method,robot,setting,task,seed,episode,normalized_cost,success,final_error,path_distance,steps_to_goal\n"
 
 
@@ -61,13 +64,15 @@ def test_records_are_labelled_from_their_signatures_and_stage_keys(tmp_path):
                         ("normal", "goal_reaching"): [0.1, float("nan")]},
                  keys={("legs_disabled", "velocity_tracking"): "aaaaaaaaaaaa"}, factors={"num_transitions": 2000},
                  cpu="Intel", seconds=120.0)
-    runs = read_records(tmp_path, folder="study")
+    runs = read_records(tmp_path, folder="study", variants=VARIANTS)
     assert {(r.method, r.profile, r.setting, r.task) for r in runs} == {
         ("ik_plain", "stiff", "legs_disabled", "velocity_tracking"), ("ik_plain", "stiff", "normal", "goal_reaching")}
     damaged = select(runs, setting="legs_disabled")[0]
     assert (damaged.config, damaged.cpu, damaged.folder, damaged.seed) == ("aaaaaaaaaaaa", "Intel", "study", 1)
     assert damaged.factor("num_transitions") == 2000 and damaged.minutes == pytest.approx(2.0)
     assert damaged.options == ()  # the variant's override and bookkeeping are not options
+    [plain] = {(r.method, r.options) for r in read_records(tmp_path)}   # no variants given: the recipe, overridden
+    assert plain == ("ik", ("controller.footstep_law=plain",))
     goals = select(runs, task="goal_reaching")[0]
     assert goals.cost == pytest.approx(0.55)  # a fallen robot's NaN counts as 1
     assert job_compute(damaged.record) == (pytest.approx(2.0), 1, "Intel")
@@ -84,7 +89,7 @@ def test_a_high_levels_budget_and_the_2x512_sac_sac_are_read_from_the_record(tmp
                  factors={"high_level_frames": 10000})
     write_record(tmp_path, "sac_sac_2x512/a1_seed0", method="sac_sac", robot="a1", seed=0, costs=costs,
                  factors={"high_level_frames": 10000}, overrides=["low_level.hidden=512"])
-    runs = read_records(tmp_path)
+    runs = read_records(tmp_path, variants=VARIANTS)
     assert {(r.method, r.task, r.factor("high_level_frames")) for r in runs} == {
         (m, t, frames) for m, frames in (("sac", 2000), ("sac_sac", 10000), ("sac_sac_2x512", 10000))
         for t in ("goal_reaching", "velocity_tracking")}

@@ -2,7 +2,8 @@
 
 import pytest
 
-from hierloco.recipes.compare.paper_check import check_claims, load_causes, paper_check_markdown, seed_means
+from hierloco.claims import seed_means
+from hierloco.recipes.compare.paper_check import check_claims, load_causes, paper_check_markdown
 
 
 def rows(costs: dict, setting="normal", task="velocity_tracking", robot="a1"):

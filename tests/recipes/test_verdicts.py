@@ -157,7 +157,8 @@ def test_latent_continuity_is_decided_over_seeds_from_the_stage_s_reports(tmp_pa
     write_record(jobs, "lat/paper/daisy_seed9", method="lat", robot="daisy", seed=9,
                  costs={("normal", "velocity_tracking"): [0.2]})  # planned no latent_continuity stage
     evidence = load(results)
-    assert sorted(r["seed"] for r in evidence.continuity if r["robot"] == "daisy") == [0, 1, 2]
+    reports = evidence.reports["latent_map"]["latent_continuity"]
+    assert sorted(r["seed"] for r in reports if r["robot"] == "daisy") == [0, 1, 2]
     written = pages(evidence)
     paper = written["paper_check.md"]
     rows = {line.split(" | ")[0][2:]: line for line in paper.splitlines() if "| latent lattice |" in line}
@@ -189,3 +190,68 @@ def test_the_gait_a_target_needs_is_decided_from_the_gait_study_s_profile_table(
         assert "gaits/daisy_speeds/verdicts.md" in written
     study = written["gaits/daisy_speeds/verdicts.md"]
     assert "0.30 m/s: tripod" in study and "n=3; 2 gaits" in study and "no records" in study
+
+
+TOY_CLAIMS = '''
+from hierloco.claims import CLAIMS, Claim, Source, Study, decided, describe, part, seed_costs
+
+
+def walks(evidence):
+    runs = evidence.runs.get("toy", [])
+    return [decided("toy_walks", "LAT walks to its goals", robot, "normal", "goal_reaching",
+                    describe("lat", lat := seed_costs(runs, robot=robot, method="lat", task="goal_reaching")), "-",
+                    [part("lat vs standing still", lat, 1.0, "better", names=("lat:normal", "standing still"))],
+                    "Sec. IV-A")
+            for robot in sorted({r.robot for r in runs})]
+
+
+STUDY = Study("toy", command="hierloco study toy_study", order=1000, records=("toy/records",), checks=walks)
+SOURCE = Source("toy", order=1000, checks=walks)
+CLAIM = Claim(order=1000, words="\\"the toy walks\\"", where="Sec. IV-A", source="toy", key="toy_walks")
+UNMEASURED = Claim(order=1001, words="the toy flies", where="Sec. IV-F", needs="wings")
+CLAIMS.add(STUDY, SOURCE, CLAIM, UNMEASURED)
+'''
+
+
+def test_a_new_study_is_its_own_folder_and_its_claims_are_judged_and_rendered(tmp_path, monkeypatch):
+    """A study folder of its own (``run.py``, ``config.yaml``, ``claims.py``), outside the package, found as
+    ``hierloco study ./toy_study`` finds it: its ``claims.py`` is imported, and its page, its claim in the paper's
+    list and its claim not measured yet are rendered, with nothing in the verdicts command naming it."""
+    import sys
+    from pathlib import Path
+
+    import hierloco.recipes.verdicts as verdicts
+    from hierloco.claims import CLAIMS
+    from hierloco.pipeline.methods import STUDIES
+
+    folder = tmp_path / "studies" / "toy_study"
+    folder.mkdir(parents=True)
+    (folder / "run.py").write_text("def main():\n    pass\n")
+    (folder / "config.yaml").write_text("seeds: [0]\n")
+    (folder / "claims.py").write_text(TOY_CLAIMS)
+    CLAIMS.discover()
+    command, studies = Path(verdicts.__file__).read_text(), [s.name.split("/")[0] for s in CLAIMS.studies()]
+    assert "compare_full" in studies and not [name for name in studies if name in command] and "toy" not in command
+    results = results_tree(tmp_path / "results")
+    for seed in range(3):
+        write_record(results / "toy" / "records", f"a1_seed{seed}", method="lat", robot="a1", seed=seed,
+                     costs={("normal", "goal_reaching"): [0.2 + 0.01 * seed, 0.3]})
+    monkeypatch.syspath_prepend(str(folder.parent))
+    STUDIES.find(str(folder))
+    try:
+        written = pages(load(results))
+        assert "| LAT walks to its goals | a1 | normal | goal_reaching |" in written["toy/verdicts.md"]
+        assert "`hierloco study toy_study`" in written["toy/verdicts.md"]
+        paper = written["paper_check.md"]
+        section = paper[paper.index('. "the toy walks"'):]
+        row = next(line for line in section.splitlines() if line.startswith("| a1 | normal | goal_reaching |"))
+        assert "lat:normal 0.255 (n=3; toy)" in row and "**holds**" in row and row.endswith("| toy |")
+        assert "| the toy flies | Sec. IV-F | not measured yet | wings |" in paper
+        assert "`results/toy/records`" in paper
+    finally:
+        STUDIES.unregister("toy_study")
+        if (toy := sys.modules.get("toy_study.claims")) is not None:
+            CLAIMS.remove(toy.STUDY, toy.SOURCE, toy.CLAIM, toy.UNMEASURED)
+        for name in ("toy_study.claims", "toy_study"):
+            sys.modules.pop(name, None)
+    assert "toy/verdicts.md" not in pages(load(results))

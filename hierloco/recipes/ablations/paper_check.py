@@ -9,8 +9,8 @@ mean normalised costs (each trial's mean over its targets first) with the tests 
 minimum effect; "no significant difference" is read as *equivalence*: every pair of values within the margin
 (TOST), and it does not hold when a pair is shown to differ by more than the margin (each pair refuted at alpha /
 pairs). A claim about values the study did not run is "not measured". The page is written by
-:func:`recipes.compare.paper_check.paper_check_markdown`, with the causes we checked for the claims not found to
-hold (a YAML file, :func:`load_causes`).
+:func:`hierloco.claims.checks_markdown`, with the causes we checked for the claims not found to hold (a YAML
+file, :func:`load_causes`).
 
     >>> rows = [{"method": f"latent_dim={d}", "robot": "daisy", "setting": "normal", "task": "goal_reaching",
     ...          "seed": s, "normalized_cost": 0.1 + 0.001 * s} for d in (2, 3, 4) for s in range(3)]
@@ -25,9 +25,9 @@ from itertools import combinations
 
 import numpy as np
 
+from hierloco import claims as claims_lib
 from hierloco import stats
-from hierloco.recipes.compare import paper_check
-from hierloco.recipes.compare.paper_check import NOT_MEASURED, TASKS, Check, seed_means
+from hierloco.claims import NOT_MEASURED, TASKS, Check, decided, part, seed_means
 
 
 @dataclass(frozen=True)
@@ -63,6 +63,7 @@ CLAIMS = (
           "\"no significant difference in performance between 2000 and 5000\"", "Fig. 10d, Sec. IV-E"),
 )
 KEYS = tuple(claim.key for claim in CLAIMS)
+PAPER_COLUMN = "the paper (Sec. IV-E, Fig. 10b-d, Daisy)"
 CRITERIA = (f"Tests over the trials (`docs/statistics.md`), alpha = {stats.ALPHA}: \"better\" holds when the cost is "
             f"significantly lower (one-sided Welch t) by at least {stats.MIN_EFFECT_REL:.0%} of the other's mean, and "
             "does not hold when the gain is significantly below that; \"no significant difference\" is an "
@@ -109,13 +110,13 @@ def _decide(claim: Claim, trials: dict, robot: str, task: str, ours: str) -> Che
                      f"no trials of {', '.join(map(str, missing))}", claim.figure)
     if claim.kind == "better":
         worse, better = (trials[v] for v in claim.values)
-        parts = [paper_check.part(f"{claim.values[1]} vs {claim.values[0]}", better, worse, "better",
-                                  names=(f"{claim.name}={claim.values[1]}", f"{claim.name}={claim.values[0]}"))]
+        parts = [part(f"{claim.values[1]} vs {claim.values[0]}", better, worse, "better",
+                      names=(f"{claim.name}={claim.values[1]}", f"{claim.name}={claim.values[0]}"))]
     else:
         pairs = list(combinations(trials, 2))
-        parts = [paper_check.part(f"{a} vs {b}", trials[a], trials[b], "close", parts=len(pairs),
-                                  names=(f"{claim.name}={a}", f"{claim.name}={b}")) for a, b in pairs]
-    check = paper_check.decided(claim.key, claim.text, robot, "normal", task, ours, claim.paper, parts, claim.figure)
+        parts = [part(f"{a} vs {b}", trials[a], trials[b], "close", parts=len(pairs),
+                      names=(f"{claim.name}={a}", f"{claim.name}={b}")) for a, b in pairs]
+    check = decided(claim.key, claim.text, robot, "normal", task, ours, claim.paper, parts, claim.figure)
     if claim.kind == "no_difference" and check.verdict == stats.DOES_NOT_HOLD:
         differ = ", ".join(p.label for p in parts if p.decision.verdict == stats.DOES_NOT_HOLD)
         return Check(check.key, check.claim, robot, "normal", task, ours, claim.paper, check.verdict,
@@ -123,12 +124,12 @@ def _decide(claim: Claim, trials: dict, robot: str, task: str, ours: str) -> Che
     return check
 
 
-def load_causes(path) -> list[paper_check.Cause]:
-    """The causes (a YAML file, as :func:`recipes.compare.paper_check.load_causes`) for these claims."""
-    return paper_check.load_causes(path, claims=KEYS)
+def load_causes(path) -> list[claims_lib.Cause]:
+    """The causes (a YAML file, :func:`hierloco.claims.load_causes`) for these claims."""
+    return claims_lib.load_causes(path, claims=KEYS)
 
 
 def paper_check_markdown(checks: list[Check], *, title: str, causes=()) -> str:
     """The checks as ``paper_check.md``: the paper's words beside our numbers (value: mean +- std over trials)."""
-    return paper_check.paper_check_markdown(checks, title=title, causes=causes, criteria=CRITERIA,
-                                            paper_column="the paper (Sec. IV-E, Fig. 10b-d, Daisy)")
+    return claims_lib.checks_markdown(checks, title=title, causes=causes, criteria=CRITERIA,
+                                      paper_column=PAPER_COLUMN)

@@ -19,21 +19,14 @@ with "not checked"; a cause whose claim now holds is listed apart, so it does no
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, field
-from pathlib import Path
-
-import numpy as np
-
+from hierloco import claims as claims_lib
 from hierloco import stats
+from hierloco.claims import NOT_MEASURED, TASKS, Check, decided, describe, part, seed_means
 from hierloco.envs.tasks import GoalReaching
-from hierloco.io import ArtifactError, load_yaml
 
 LEARNED = ("lib", "sac", "sac_sac")   # the learned baselines LAT is claimed to beat on every task
 MODEL_FREE = ("sac", "sac_sac")       # trained on half of the targets, claimed not to generalise to the others
 IK_METHODS = ("ik", "ik_plain")       # IK with our footstep law, and with the paper's plain law
-TASKS = ("velocity_tracking", "goal_reaching", "trajectory_tracking")
-NOT_MEASURED = "not measured"
 # the paper's stated numbers, all A1 in simulation: (robot, setting, task, method) -> "mean +- std"; where each is
 # stated: Sec. IV-B with Fig. 7b (A1's baseline comparison), Sec. IV-C with Fig. 7d (A1, LAT and IK)
 PAPER = {("a1", "normal", "goal_reaching", "lat"): "0.34 +- 0.02",
@@ -60,97 +53,6 @@ CLAIMS = ("learned_best", "close:ik", "close:ik_plain", "damaged:ik", "damaged:i
           "heldout_worse:sac_sac")
 
 
-@dataclass(frozen=True)
-class Part:
-    """One comparison inside a claim: per-seed costs ``a`` against ``b`` (per-seed costs, or a constant), the
-    ``kind`` of test (``"better"``: ``a`` lower; ``"close"``: ``a`` within a margin of ``b``), whether the seeds
-    are ``paired``, and its :class:`hierloco.stats.Decision`."""
-
-    label: str
-    a: tuple[float, ...]
-    b: tuple[float, ...] | float
-    kind: str
-    paired: bool
-    decision: stats.Decision
-    names: tuple[str, str] = ("", "")   # what a and b are: (method, setting) labels for readers of the check
-    options: tuple = ()                 # the test's own options (e.g. (("min_effect_rel", 0.5),)), where not the defaults
-
-
-@dataclass(frozen=True)
-class Check:
-    """One claim on one robot and task: ``ours`` and ``paper`` as "method mean +- std" text, the ``verdict``
-    (:data:`hierloco.stats.VERDICTS` or ``"not measured"``), ``detail`` (the test's numbers, or why not
-    measured) and ``parts`` (each comparison tested). ``key`` is the claim's entry in :data:`CLAIMS`."""
-
-    key: str
-    claim: str
-    robot: str
-    setting: str
-    task: str
-    ours: str
-    paper: str
-    verdict: str
-    detail: str = ""
-    figure: str = ""
-    parts: tuple[Part, ...] = field(default=(), compare=False)
-
-
-def seed_means(rows, *, method: str, robot: str, setting: str, task: str, episodes=None) -> np.ndarray:
-    """The mean normalised cost of each seed's episodes (``S``, seeds in order), NaN costs (a fallen robot) counted
-    as 1; only the episodes (indices) in ``episodes`` if given. Rows with a ``run`` field are one seed's
-    replicates (the same configuration run again, say on another machine): each run's mean first, then the seed's
-    mean over its runs (``docs/statistics.md``)."""
-    by_seed: dict = {}
-    for row in rows:
-        if episodes is not None and int(row["episode"]) not in episodes:
-            continue
-        if (row["method"], row["robot"], row["setting"], row["task"]) == (method, robot, setting, task):
-            cost = float(row["normalized_cost"])
-            runs = by_seed.setdefault(row["seed"], {})
-            runs.setdefault(row.get("run", ""), []).append(1.0 if math.isnan(cost) else cost)
-    return np.array([np.mean([np.mean(c) for c in runs.values()]) for _, runs in sorted(by_seed.items())])
-
-
-def _text(method: str, means: np.ndarray) -> str:
-    return f"{method} {means.mean():.2f} +- {means.std():.2f}"
-
-
-def part(label: str, a, b, kind: str, *, paired: bool = False, parts: int = 1, names=("", ""),
-         options: dict | None = None) -> Part:
-    """One comparison tested: per-seed costs ``a`` (``S_a``) against ``b`` (``S_b``, or a constant), ``kind``
-    ``"better"`` or ``"close"``, refuted at ``alpha / parts`` when it is one of ``parts`` comparisons of a claim;
-    ``options``: the test's own minimum effect or margin (``min_effect_rel=0.5``), where not the defaults.
-
-        >>> part("lat vs lib", [0.12, 0.11, 0.13], [0.45, 0.49, 0.44], "better").decision.verdict
-        'holds'
-    """
-    decide = stats.decide_better if kind == "better" else stats.decide_close
-    a = tuple(float(x) for x in a)
-    b = float(b) if np.ndim(b) == 0 else tuple(float(x) for x in b)
-    options = dict(options or {})
-    return Part(label, a, b, kind, paired, decide(a, b, paired=paired, refute_alpha=stats.ALPHA / parts, **options),
-                tuple(names), tuple(sorted(options.items())))
-
-
-def decided(key, claim, robot, setting, task, ours, paper, parts: list[Part], figure="") -> Check:
-    """A check from its tested parts: one part's verdict, or several combined as :func:`hierloco.stats.decide_all`
-    does (each part must hold; any part refuted at alpha / parts refutes)."""
-    verdicts = [p.decision.verdict for p in parts]
-    if len(parts) == 1:
-        verdict = verdicts[0]
-    elif all(v == stats.NOT_TESTABLE for v in verdicts):
-        verdict = stats.NOT_TESTABLE
-    elif stats.DOES_NOT_HOLD in verdicts:
-        verdict = stats.DOES_NOT_HOLD
-    elif all(v == stats.HOLDS for v in verdicts):
-        verdict = stats.HOLDS
-    else:
-        verdict = stats.INCONCLUSIVE
-    detail = parts[0].decision.reason if len(parts) == 1 else "; ".join(f"{p.label}: {p.decision.text()}"
-                                                                        for p in parts)
-    return Check(key, claim, robot, setting, task, ours, paper, verdict, detail, figure, tuple(parts))
-
-
 def check_claims(rows, tuned_ik: dict | None = None) -> list[Check]:
     """Every claim on every robot and task the rows cover (see the module doc). ``tuned_ik`` (robot -> ``ik`` or
     ``ik_plain``) marks the IK claims of the variant tuned on the training targets (``recipes/tune``), the fair IK."""
@@ -172,7 +74,7 @@ def check_claims(rows, tuned_ik: dict | None = None) -> list[Check]:
             lat = means("lat", "normal", task)
             others = {m: s for m in LEARNED if (s := means(m, "normal", task)).size}
             if lat.size and others:
-                ours = ", ".join([_text("lat", lat)] + [_text(m, s) for m, s in others.items()])
+                ours = ", ".join([describe("lat", lat)] + [describe(m, s) for m, s in others.items()])
                 checks.append(decided("learned_best", "LAT is best among the learned methods", robot, "normal",
                                        task, ours, paper("normal", task, ("lat", *LEARNED)),
                                        [part(f"vs {m}", lat, s, "better", parts=len(others),
@@ -182,7 +84,7 @@ def check_claims(rows, tuned_ik: dict | None = None) -> list[Check]:
             if sac.size and sac_sac.size:
                 checks.append(decided("sac_sac_worse", "SAC-SAC's user-defined action space does worse than SAC's "
                                        "learned one", robot, "normal", task,
-                                       f"{_text('sac', sac)}, {_text('sac_sac', sac_sac)}",
+                                       f"{describe('sac', sac)}, {describe('sac_sac', sac_sac)}",
                                        paper("normal", task, ("sac", "sac_sac")),
                                        [part("sac vs sac_sac", sac, sac_sac, "better",
                                               names=("sac:normal", "sac_sac:normal"))], figure("sac_sac_worse")))
@@ -192,14 +94,14 @@ def check_claims(rows, tuned_ik: dict | None = None) -> list[Check]:
                 if lat.size and base.size:
                     checks.append(decided(f"close:{ik}", f"LAT is close to {ik.upper()}{tuned} (within "
                                            f"{stats.EQUIV_MARGIN_REL:.0%})", robot, "normal", task,
-                                           f"{_text('lat', lat)}, {_text(ik, base)}", "-",
+                                           f"{describe('lat', lat)}, {describe(ik, base)}", "-",
                                            [part(f"lat vs {ik}", lat, base, "close",
                                                   names=("lat:normal", f"{ik}:normal"))], figure("close")))
                 damaged, damaged_ik = means("lat", "legs_disabled", task), means(ik, "legs_disabled", task)
                 if damaged.size and damaged_ik.size:
                     checks.append(decided(f"damaged:{ik}", f"LAT beats {ik.upper()}{tuned} with legs disabled",
                                            robot, "legs_disabled", task,
-                                           f"{_text('lat', damaged)}, {_text(ik, damaged_ik)}",
+                                           f"{describe('lat', damaged)}, {describe(ik, damaged_ik)}",
                                            paper("legs_disabled", task, ("lat", ik)),
                                            [part(f"lat vs {ik}", damaged, damaged_ik, "better",
                                                   names=("lat:legs_disabled", f"{ik}:legs_disabled"))],
@@ -207,7 +109,7 @@ def check_claims(rows, tuned_ik: dict | None = None) -> list[Check]:
                 if base.size and damaged_ik.size:
                     checks.append(decided(f"ik_deteriorates:{ik}", f"{ik.upper()}{tuned} deteriorates with legs "
                                            "disabled", robot, "legs_disabled", task,
-                                           f"normal {_text(ik, base)}, legs disabled {_text(ik, damaged_ik)}",
+                                           f"normal {describe(ik, base)}, legs disabled {describe(ik, damaged_ik)}",
                                            paper("legs_disabled", task, (ik,)),
                                            [part(f"{ik} normal vs legs disabled", base, damaged_ik, "better",
                                                   names=(f"{ik}:normal", f"{ik}:legs_disabled"))],
@@ -217,7 +119,7 @@ def check_claims(rows, tuned_ik: dict | None = None) -> list[Check]:
         known = paper("normal", "velocity_tracking", ("lat", "lib"))
         if lat.size and lib.size:
             checks.append(decided("lib_worse", claim, robot, "normal", "velocity_tracking",
-                                   f"{_text('lat', lat)}, {_text('lib', lib)}", known,
+                                   f"{describe('lat', lat)}, {describe('lib', lib)}", known,
                                    [part("lat vs lib", lat, lib, "better", names=("lat:normal", "lib:normal"))],
                                    figure("lib_worse")))
         else:
@@ -227,7 +129,7 @@ def check_claims(rows, tuned_ik: dict | None = None) -> list[Check]:
         if lat.size and lib.size:
             checks.append(decided("lib_goals_close", "LIB generalises well to goal reaching (close to LAT, "
                                    f"within {stats.EQUIV_MARGIN_REL:.0%})", robot, "normal", "goal_reaching",
-                                   f"{_text('lib', lib)}, {_text('lat', lat)}", "-",
+                                   f"{describe('lib', lib)}, {describe('lat', lat)}", "-",
                                    [part("lib vs lat", lib, lat, "close", names=("lib:normal", "lat:normal"))],
                                    figure("lib_goals_close")))
         checks += _generalisation(rows, robot)
@@ -250,32 +152,16 @@ def _generalisation(rows, robot: str) -> list[Check]:
                  for name, chosen in (("training goals", training), ("held-out goals", episodes - training))}
         checks.append(decided(f"heldout_worse:{method}", f"{method.upper()} does worse on its held-out goals than "
                                "on its training goals", robot, "normal", "goal_reaching",
-                               ", ".join(_text(name, means) for name, means in split.items()), "-",
+                               ", ".join(describe(name, means) for name, means in split.items()), "-",
                                [part("training vs held-out goals", split["training goals"], split["held-out goals"],
                                       "better", paired=True, names=(f"{method}:training", f"{method}:held-out"))],
                                FIGURES["heldout_worse"].get(robot, "")))
     return checks
 
 
-@dataclass(frozen=True)
-class Cause:
-    """The cause we checked for the claims ``claims`` (keys of :data:`CLAIMS`) on ``robots`` and ``tasks`` (empty:
-    all) that are not found to hold."""
-
-    claims: tuple[str, ...]
-    robots: tuple[str, ...]
-    tasks: tuple[str, ...]
-    text: str
-
-    def covers(self, check: Check) -> bool:
-        return (check.key in self.claims and (not self.robots or check.robot in self.robots)
-                and (not self.tasks or check.task in self.tasks))
-
-
-def load_causes(path, claims: tuple[str, ...] = CLAIMS) -> list[Cause]:
-    """The causes in the YAML file ``path``: a list of ``{claims: [...], robots: [...], tasks: [...], cause: text}``
-    (``robots`` and ``tasks`` optional), each claim one of ``claims`` (the keys of the checks the causes are for).
-    Raises ValueError naming every malformed entry.
+def load_causes(path, claims: tuple[str, ...] = CLAIMS) -> list[claims_lib.Cause]:
+    """The causes in the YAML file ``path`` for these claims (:func:`hierloco.claims.load_causes`; ``claims``: the
+    keys of the checks the causes are for, default :data:`CLAIMS`). Raises ValueError naming every malformed entry.
 
         >>> import tempfile
         >>> f = tempfile.NamedTemporaryFile("w", suffix=".yaml", delete=False)
@@ -284,40 +170,7 @@ def load_causes(path, claims: tuple[str, ...] = CLAIMS) -> list[Cause]:
         >>> load_causes(f.name)[0].claims
         ('lib_worse',)
     """
-    path = Path(path)
-    if not path.is_file():
-        raise ValueError(f"causes: no file {str(path)!r}")
-    try:
-        entries = load_yaml(path)  # read safely: a shared causes file holds no YAML bomb
-    except ArtifactError as error:
-        raise ValueError(f"causes: {error}") from None
-    if not isinstance(entries, list):
-        raise ValueError(f"causes: {path} must hold a list of entries, got {type(entries).__name__}")
-    causes, problems = [], []
-    for i, entry in enumerate(entries):
-        where = f"causes: {path} entry {i}"
-        if not isinstance(entry, dict):
-            problems.append(f"{where} is not a mapping")
-            continue
-        unknown = sorted(set(entry) - {"claims", "robots", "tasks", "cause"})
-        lists = {name: entry.get(name, []) for name in ("claims", "robots", "tasks")}
-        bad = [name for name, value in lists.items() if not (isinstance(value, list)
-                                                             and all(isinstance(v, str) for v in value))]
-        text = entry.get("cause")
-        problems += [f"{where}: unknown fields {unknown} (claims, robots, tasks, cause)"] if unknown else []
-        problems += [f"{where}: {name} must be a list of names" for name in bad]
-        if not bad:
-            problems += [f"{where}: unknown claim {c!r} ({', '.join(claims)})" for c in lists["claims"]
-                         if c not in claims]
-            problems += [f"{where}: unknown task {t!r} ({', '.join(TASKS)})" for t in lists["tasks"] if t not in TASKS]
-            problems += [f"{where}: claims is empty"] if not lists["claims"] else []
-        problems += [f"{where}: cause must be a non-empty text"] if not (isinstance(text, str) and text.strip()) else []
-        if not problems:
-            causes.append(Cause(tuple(lists["claims"]), tuple(lists["robots"]), tuple(lists["tasks"]),
-                                " ".join(text.split())))
-    if problems:
-        raise ValueError("; ".join(problems))
-    return causes
+    return claims_lib.load_causes(path, claims)
 
 
 CRITERIA = (f"Tests over seeds (`docs/statistics.md`, `hierloco.stats`), alpha = {stats.ALPHA}: \"better\", "
@@ -329,55 +182,14 @@ CRITERIA = (f"Tests over seeds (`docs/statistics.md`, `hierloco.stats`), alpha =
             f"standing still's cost or worse is not testable here; otherwise a claim neither established nor refuted "
             f"is inconclusive at this many seeds. d: the difference of the means with its {1 - 2 * stats.ALPHA:.0%} "
             "interval.")
-UNDECIDED = (stats.DOES_NOT_HOLD, stats.INCONCLUSIVE, stats.NOT_TESTABLE)
+PAPER_COLUMN = "paper (A1's numbers: Fig. 7b, Sec. IV-B; legs disabled Fig. 7d, Sec. IV-C)"
 
 
-def counts_line(checks) -> str:
-    """How many checks got each verdict, e.g. ``"3 hold, 1 do not hold, 0 inconclusive, 0 not testable here"``
-    (and how many were not measured, where any were)."""
-    tally = {v: sum(c.verdict == v for c in checks) for v in (*stats.VERDICTS, NOT_MEASURED)}
-    if not tally[NOT_MEASURED]:
-        del tally[NOT_MEASURED]
-    names = {stats.HOLDS: "hold", stats.DOES_NOT_HOLD: "do not hold", stats.INCONCLUSIVE: "inconclusive",
-             stats.NOT_TESTABLE: "not testable here", NOT_MEASURED: "not measured"}
-    return ", ".join(f"{n} {names[v]}" for v, n in tally.items())
-
-
-def paper_check_markdown(checks: list[Check], *, title: str, causes: list[Cause] = (), criteria: str = CRITERIA,
-                         paper_column: str = "paper (A1's numbers: Fig. 7b, Sec. IV-B; legs disabled Fig. 7d, "
-                                             "Sec. IV-C)", with_causes: bool = True) -> str:
-    """The checks as a Markdown page (``paper_check.md``), each claim not found to hold (does not hold,
-    inconclusive, not testable here) with its numbered cause from ``causes`` (the first that covers it) or "not
-    checked". ``criteria`` says what the verdicts mean; ``paper_column`` heads the column of what the paper says;
-    ``with_causes=False`` leaves the causes out (a study that keeps none)."""
-    numbers: dict[Cause, int] = {}
-
-    def cause_of(check: Check) -> str:
-        if check.verdict not in UNDECIDED:
-            return ""
-        cause = next((c for c in causes if c.covers(check)), None)
-        if cause is None:
-            return "not checked"
-        return f"[{numbers.setdefault(cause, len(numbers) + 1)}](#cause-{numbers[cause]})"
-
-    lines = [f"# The paper's claims, checked\n\n{title}. Normalised cost, mean +- std over seeds (each seed's mean "
-             f"over its targets); a fallen robot's cost counts as 1. {criteria}\n",
-             f"| claim | robot | setting | task | ours | {paper_column} | verdict | test |"
-             + (" cause |" if with_causes else ""),
-             "|---|---|---|---|---|---|---|---|" + ("---|" if with_causes else "")]
-    lines += [f"| {c.claim} | {c.robot} | {c.setting} | {c.task} | {c.ours} | {c.paper} | {c.verdict} | "
-              f"{c.detail or '-'} |" + (f" {cause_of(c)} |" if with_causes else "") for c in checks]
-    open_ = [c for c in checks if c.verdict in UNDECIDED]
-    unexplained = sum(cause_of(c) == "not checked" for c in open_)
-    lines.append(f"\n{counts_line(checks)}" + (f" ({len(open_) - unexplained} of the {len(open_)} not found to hold "
-                                                f"with the cause we checked, {unexplained} not checked)."
-                                                if with_causes else "."))
-    if numbers:
-        lines.append("\n## The causes we checked\n")
-        lines += [f"<a id=\"cause-{n}\"></a>{n}. {cause.text}\n" for cause, n in numbers.items()]
-    stale = [c for c in causes if c not in numbers]
-    if stale:
-        lines.append("\n## Causes given for claims that hold or were not measured here\n")
-        lines += [f"- ({', '.join(c.claims)}; {', '.join(c.robots) or 'every robot'}; "
-                  f"{', '.join(c.tasks) or 'every task'}) {c.text}" for c in stale]
-    return "\n".join(lines) + "\n"
+def paper_check_markdown(checks: list[Check], *, title: str, causes: list[claims_lib.Cause] = (),
+                         criteria: str = CRITERIA, paper_column: str = PAPER_COLUMN,
+                         with_causes: bool = True) -> str:
+    """The checks as ``paper_check.md`` (:func:`hierloco.claims.checks_markdown`), each claim not found to hold with
+    its numbered cause from ``causes`` or "not checked"; ``criteria`` says what the verdicts mean (default the
+    comparison's tests), ``paper_column`` heads the column of what the paper says (A1's numbers)."""
+    return claims_lib.checks_markdown(checks, title=title, causes=causes, criteria=criteria,
+                                      paper_column=paper_column, with_causes=with_causes)

@@ -104,7 +104,7 @@ def verdict_table(rows: list[dict], methods: list[str], tasks) -> str:
     seed (``docs/statistics.md``): "better" (a lower cost by at least the minimum effect) and "close" (within the
     equivalence margin); then how many places each variant is better, close, or worse."""
     from hierloco.stats import decide_better, decide_close
-    from hierloco.recipes.compare.paper_check import seed_means
+    from hierloco.claims import seed_means
 
     lines = ["| robot | setting | task | variant | better than the MLP? | as good as the MLP (close)? |",
              "|---|---|---|---|---|---|"]

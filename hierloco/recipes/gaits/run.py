@@ -193,7 +193,7 @@ def switches(sequence: list[str]) -> int:
 def gaits_markdown(labels: list[dict], rows: list[dict], gaits: dict, tasks, *, own: str, several: str,
                    title: str) -> str:
     from hierloco.stats import decide_close
-    from hierloco.recipes.compare.paper_check import seed_means
+    from hierloco.claims import seed_means
 
     names = sorted(gaits)
     lines = [f"# Gait transitions ({title})", "",
@@ -405,7 +405,7 @@ def profile_markdown(found: list[dict], costs: list[dict], gaits: dict, *, own: 
     as the own gait" (``docs/statistics.md``); with ``top`` (each gait's fastest command, ``gait_boxes``), which
     targets need a gait and whether the planner picks it (:func:`needed_gait_markdown`)."""
     from hierloco.stats import decide_close
-    from hierloco.recipes.compare.paper_check import seed_means
+    from hierloco.claims import seed_means
 
     names = sorted(gaits)
     lines = [f"# Gait transitions on a speed profile ({title})", ""]

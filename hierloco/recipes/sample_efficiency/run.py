@@ -101,7 +101,7 @@ def samples_in_all(method: str, samples: int, num_tasks: int) -> int:
 def seed_curves(rows: list[dict], tasks) -> list[dict]:
     """One row per robot, method, task, budget and seed: the seed's mean normalised cost over its episodes
     (:func:`recipes.compare.paper_check.seed_means`: a fallen robot's episode counts as 1)."""
-    from hierloco.recipes.compare.paper_check import seed_means
+    from hierloco.claims import seed_means
 
     groups: dict = {}
     for row in rows:
@@ -120,7 +120,7 @@ def seed_curves(rows: list[dict], tasks) -> list[dict]:
 def check_claims(curves: list[dict], full: int) -> list:
     """The two claims per robot, task and budget (:class:`recipes.compare.paper_check.Check`, keys
     ``sample_efficient`` and ``saturates``), each decided by its test over seeds (:mod:`hierloco.stats`)."""
-    from hierloco.recipes.compare.paper_check import decided, part
+    from hierloco.claims import decided, part
 
     def values(robot, method, task, samples):
         return [c["cost"] for c in curves if (c["robot"], c["method"], c["task"], c["samples_per_task"]) ==

@@ -31,7 +31,7 @@ from hierloco.results import EPISODE_COLUMNS, csv_text
 from hierloco.pipeline import studies
 from hierloco.pipeline.config import ConfigError, as_lists
 from hierloco.pipeline.study import end_study, missing_markdown, run_study, seed_problems, study_main, study_robots
-from hierloco.recipes.compare.paper_check import seed_means
+from hierloco.claims import seed_means
 
 
 def check(cfg) -> list:

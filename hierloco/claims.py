@@ -1,0 +1,575 @@
+"""The paper's claims as a registry: the blocks every claim is decided with, each study's declaration of its runs and
+claims, and the evidence read from the job records (``docs/claims.md``).
+
+**Building blocks.** One claim on one robot and task is a :class:`Check`: what is compared (its :class:`Part`\\ s:
+per-seed costs against per-seed costs or a constant), each part's test (:func:`part`: "better" or "close", the tests
+of :mod:`hierloco.stats`, ``docs/statistics.md``), the verdict (:func:`decided`: one part's, or every part must hold
+and one refuted at alpha / parts refutes) and where the paper makes the claim. :func:`seed_means` (per-episode rows)
+and :func:`seed_costs` (runs) give a part its per-seed values; a claim not found to hold is matched with the cause
+we checked for it (:class:`Cause`, :func:`load_causes`); :func:`checks_markdown` writes checks as a table.
+
+**The registry.** A study declares what judging it needs in ``claims.py`` beside its ``run.py``, adding to
+:data:`CLAIMS`:
+
+- :class:`Study`: its folder under ``results/``, where its runs are (job records; or a per-episode table, or a table
+  of rows of its own), the command that made it, and the checks of its own page (``<study>/verdicts.md``);
+- :class:`Source`: a set of checks computed once from the :class:`Evidence` (say the comparison's claims on the
+  pooled runs), which the paper's claims are decided from, and the job a new seed of a side of it runs;
+- :class:`Claim`: one claim of the paper (its words, where the paper makes it, the numbers it states) with the
+  source and check key that decide it, or the study it still needs;
+- :class:`Counted`: a statement about the design, counted rather than tested.
+
+``hierloco verdicts`` imports every study's ``claims`` module (:meth:`ClaimRegistry.discover`: the studies of
+:data:`hierloco.pipeline.methods.STUDIES`, the recipe folders and the ``hierloco.studies`` entry points), reads the
+evidence (:func:`load`) and renders its pages from what is registered; it names no study.
+
+Example (two methods on three seeds, one claim):
+    >>> rows = [{"method": m, "robot": "a1", "setting": "normal", "task": "goal_reaching", "seed": s,
+    ...          "normalized_cost": c + 0.01 * s} for m, c in (("lat", 0.1), ("lib", 0.5)) for s in range(3)]
+    >>> lat, lib = (seed_means(rows, method=m, robot="a1", setting="normal", task="goal_reaching")
+    ...             for m in ("lat", "lib"))
+    >>> check = decided("lat_best", "LAT beats LIB", "a1", "normal", "goal_reaching", describe("lat", lat), "-",
+    ...                 [part("lat vs lib", lat, lib, "better", names=("lat:normal", "lib:normal"))])
+    >>> check.verdict, check.ours
+    ('holds', 'lat 0.11 +- 0.01')
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import math
+import re
+import sys
+from collections import defaultdict
+from dataclasses import KW_ONLY, dataclass, field, replace
+from pathlib import Path
+from typing import Callable, Iterable, Mapping
+
+import numpy as np
+
+from hierloco import stats
+from hierloco.evidence import (Run, adopt_configs, read_findings, read_records, read_stage_reports, read_table,
+                               seed_values, select)
+from hierloco.io import ArtifactError, load_yaml
+
+TASKS = ("velocity_tracking", "goal_reaching", "trajectory_tracking")
+NOT_MEASURED = "not measured"
+UNDECIDED = (stats.DOES_NOT_HOLD, stats.INCONCLUSIVE, stats.NOT_TESTABLE)
+
+
+# --- building blocks -------------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Part:
+    """One comparison inside a claim: per-seed costs ``a`` against ``b`` (per-seed costs, or a constant), the
+    ``kind`` of test (``"better"``: ``a`` lower; ``"close"``: ``a`` within a margin of ``b``), whether the seeds
+    are ``paired``, and its :class:`hierloco.stats.Decision`."""
+
+    label: str
+    a: tuple[float, ...]
+    b: tuple[float, ...] | float
+    kind: str
+    paired: bool
+    decision: stats.Decision
+    names: tuple[str, str] = ("", "")   # what a and b are: (method, setting) labels for readers of the check
+    options: tuple = ()                 # the test's own options (("min_effect_rel", 0.5),), where not the defaults
+
+
+@dataclass(frozen=True)
+class Check:
+    """One claim on one robot and task: ``ours`` and ``paper`` as "method mean +- std" text, the ``verdict``
+    (:data:`hierloco.stats.VERDICTS` or ``"not measured"``), ``detail`` (the test's numbers, or why not
+    measured) and ``parts`` (each comparison tested). ``key`` names the claim in its study (what a file of causes
+    and a :class:`Claim` name)."""
+
+    key: str
+    claim: str
+    robot: str
+    setting: str
+    task: str
+    ours: str
+    paper: str
+    verdict: str
+    detail: str = ""
+    figure: str = ""
+    parts: tuple[Part, ...] = field(default=(), compare=False)
+
+
+def seed_means(rows, *, method: str, robot: str, setting: str, task: str, episodes=None) -> np.ndarray:
+    """The mean normalised cost of each seed's episodes (``S``, seeds in order), NaN costs (a fallen robot) counted
+    as 1; only the episodes (indices) in ``episodes`` if given. Rows with a ``run`` field are one seed's
+    replicates (the same configuration run again, say on another machine): each run's mean first, then the seed's
+    mean over its runs (``docs/statistics.md``)."""
+    by_seed: dict = {}
+    for row in rows:
+        if episodes is not None and int(row["episode"]) not in episodes:
+            continue
+        if (row["method"], row["robot"], row["setting"], row["task"]) == (method, robot, setting, task):
+            cost = float(row["normalized_cost"])
+            runs = by_seed.setdefault(row["seed"], {})
+            runs.setdefault(row.get("run", ""), []).append(1.0 if math.isnan(cost) else cost)
+    return np.array([np.mean([np.mean(c) for c in runs.values()]) for _, runs in sorted(by_seed.items())])
+
+
+def seed_costs(runs: Iterable[Run], **labels) -> np.ndarray:
+    """The pooled per-seed mean costs (``S``) of the runs with these labels (:func:`hierloco.evidence.select`,
+    :func:`hierloco.evidence.seed_values`)."""
+    return seed_values(select(runs, **labels))[1]
+
+
+def describe(name: str, values) -> str:
+    """``"<name> <mean> +- <std>"`` of per-seed values, two decimals."""
+    return f"{name} {np.mean(values):.2f} +- {np.std(values):.2f}"
+
+
+def part(label: str, a, b, kind: str, *, paired: bool = False, parts: int = 1, names=("", ""),
+         options: dict | None = None) -> Part:
+    """One comparison tested: per-seed costs ``a`` (``S_a``) against ``b`` (``S_b``, or a constant), ``kind``
+    ``"better"`` or ``"close"``, refuted at ``alpha / parts`` when it is one of ``parts`` comparisons of a claim;
+    ``options``: the test's own minimum effect or margin (``min_effect_rel=0.5``), where not the defaults.
+
+        >>> part("lat vs lib", [0.12, 0.11, 0.13], [0.45, 0.49, 0.44], "better").decision.verdict
+        'holds'
+    """
+    decide = stats.decide_better if kind == "better" else stats.decide_close
+    a = tuple(float(x) for x in a)
+    b = float(b) if np.ndim(b) == 0 else tuple(float(x) for x in b)
+    options = dict(options or {})
+    return Part(label, a, b, kind, paired, decide(a, b, paired=paired, refute_alpha=stats.ALPHA / parts, **options),
+                tuple(names), tuple(sorted(options.items())))
+
+
+def decided(key, claim, robot, setting, task, ours, paper, parts: list[Part], figure="") -> Check:
+    """A check from its tested parts: one part's verdict, or several combined as :func:`hierloco.stats.decide_all`
+    does (each part must hold; any part refuted at alpha / parts refutes)."""
+    verdicts = [p.decision.verdict for p in parts]
+    if len(parts) == 1:
+        verdict = verdicts[0]
+    elif all(v == stats.NOT_TESTABLE for v in verdicts):
+        verdict = stats.NOT_TESTABLE
+    elif stats.DOES_NOT_HOLD in verdicts:
+        verdict = stats.DOES_NOT_HOLD
+    elif all(v == stats.HOLDS for v in verdicts):
+        verdict = stats.HOLDS
+    else:
+        verdict = stats.INCONCLUSIVE
+    detail = parts[0].decision.reason if len(parts) == 1 else "; ".join(f"{p.label}: {p.decision.text()}"
+                                                                        for p in parts)
+    return Check(key, claim, robot, setting, task, ours, paper, verdict, detail, figure, tuple(parts))
+
+
+@dataclass(frozen=True)
+class Cause:
+    """The cause we checked for the claims ``claims`` (check keys) on ``robots`` and ``tasks`` (empty: all) that are
+    not found to hold."""
+
+    claims: tuple[str, ...]
+    robots: tuple[str, ...]
+    tasks: tuple[str, ...]
+    text: str
+
+    def covers(self, check: Check) -> bool:
+        return (check.key in self.claims and (not self.robots or check.robot in self.robots)
+                and (not self.tasks or check.task in self.tasks))
+
+
+def load_causes(path, claims: tuple[str, ...]) -> list[Cause]:
+    """The causes in the YAML file ``path``: a list of ``{claims: [...], robots: [...], tasks: [...], cause: text}``
+    (``robots`` and ``tasks`` optional), each claim one of ``claims`` (the keys of the checks the causes are for).
+    Raises ValueError naming every malformed entry.
+
+        >>> import tempfile
+        >>> f = tempfile.NamedTemporaryFile("w", suffix=".yaml", delete=False)
+        >>> _ = f.write("- {claims: [lib_worse], robots: [a1], cause: LIB's experts cover two speeds.}")
+        >>> f.close()
+        >>> load_causes(f.name, claims=("lib_worse",))[0].claims
+        ('lib_worse',)
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"causes: no file {str(path)!r}")
+    try:
+        entries = load_yaml(path)  # read safely: a shared causes file holds no YAML bomb
+    except ArtifactError as error:
+        raise ValueError(f"causes: {error}") from None
+    if not isinstance(entries, list):
+        raise ValueError(f"causes: {path} must hold a list of entries, got {type(entries).__name__}")
+    causes, problems = [], []
+    for i, entry in enumerate(entries):
+        where = f"causes: {path} entry {i}"
+        if not isinstance(entry, dict):
+            problems.append(f"{where} is not a mapping")
+            continue
+        unknown = sorted(set(entry) - {"claims", "robots", "tasks", "cause"})
+        lists = {name: entry.get(name, []) for name in ("claims", "robots", "tasks")}
+        bad = [name for name, value in lists.items() if not (isinstance(value, list)
+                                                             and all(isinstance(v, str) for v in value))]
+        text = entry.get("cause")
+        problems += [f"{where}: unknown fields {unknown} (claims, robots, tasks, cause)"] if unknown else []
+        problems += [f"{where}: {name} must be a list of names" for name in bad]
+        if not bad:
+            problems += [f"{where}: unknown claim {c!r} ({', '.join(claims)})" for c in lists["claims"]
+                         if c not in claims]
+            problems += [f"{where}: unknown task {t!r} ({', '.join(TASKS)})" for t in lists["tasks"] if t not in TASKS]
+            problems += [f"{where}: claims is empty"] if not lists["claims"] else []
+        problems += [f"{where}: cause must be a non-empty text"] if not (isinstance(text, str) and text.strip()) else []
+        if not problems:
+            causes.append(Cause(tuple(lists["claims"]), tuple(lists["robots"]), tuple(lists["tasks"]),
+                                " ".join(text.split())))
+    if problems:
+        raise ValueError("; ".join(problems))
+    return causes
+
+
+def counts_line(checks) -> str:
+    """How many checks got each verdict, e.g. ``"3 hold, 1 do not hold, 0 inconclusive, 0 not testable here"``
+    (and how many were not measured, where any were)."""
+    tally = {v: sum(c.verdict == v for c in checks) for v in (*stats.VERDICTS, NOT_MEASURED)}
+    if not tally[NOT_MEASURED]:
+        del tally[NOT_MEASURED]
+    names = {stats.HOLDS: "hold", stats.DOES_NOT_HOLD: "do not hold", stats.INCONCLUSIVE: "inconclusive",
+             stats.NOT_TESTABLE: "not testable here", NOT_MEASURED: "not measured"}
+    return ", ".join(f"{n} {names[v]}" for v, n in tally.items())
+
+
+def checks_markdown(checks: list[Check], *, title: str, criteria: str, paper_column: str, causes: list[Cause] = (),
+                    with_causes: bool = True) -> str:
+    """The checks as a Markdown page (a study's ``paper_check.md``), each claim not found to hold (does not hold,
+    inconclusive, not testable here) with its numbered cause from ``causes`` (the first that covers it) or "not
+    checked". ``criteria`` says what the verdicts mean; ``paper_column`` heads the column of what the paper says;
+    ``with_causes=False`` leaves the causes out (a study that keeps none)."""
+    numbers: dict[Cause, int] = {}
+
+    def cause_of(check: Check) -> str:
+        if check.verdict not in UNDECIDED:
+            return ""
+        cause = next((c for c in causes if c.covers(check)), None)
+        if cause is None:
+            return "not checked"
+        return f"[{numbers.setdefault(cause, len(numbers) + 1)}](#cause-{numbers[cause]})"
+
+    lines = [f"# The paper's claims, checked\n\n{title}. Normalised cost, mean +- std over seeds (each seed's mean "
+             f"over its targets); a fallen robot's cost counts as 1. {criteria}\n",
+             f"| claim | robot | setting | task | ours | {paper_column} | verdict | test |"
+             + (" cause |" if with_causes else ""),
+             "|---|---|---|---|---|---|---|---|" + ("---|" if with_causes else "")]
+    lines += [f"| {c.claim} | {c.robot} | {c.setting} | {c.task} | {c.ours} | {c.paper} | {c.verdict} | "
+              f"{c.detail or '-'} |" + (f" {cause_of(c)} |" if with_causes else "") for c in checks]
+    open_ = [c for c in checks if c.verdict in UNDECIDED]
+    unexplained = sum(cause_of(c) == "not checked" for c in open_)
+    lines.append(f"\n{counts_line(checks)}" + (f" ({len(open_) - unexplained} of the {len(open_)} not found to hold "
+                                                f"with the cause we checked, {unexplained} not checked)."
+                                                if with_causes else "."))
+    if numbers:
+        lines.append("\n## The causes we checked\n")
+        lines += [f"<a id=\"cause-{n}\"></a>{n}. {cause.text}\n" for cause, n in numbers.items()]
+    stale = [c for c in causes if c not in numbers]
+    if stale:
+        lines.append("\n## Causes given for claims that hold or were not measured here\n")
+        lines += [f"- ({', '.join(c.claims)}; {', '.join(c.robots) or 'every robot'}; "
+                  f"{', '.join(c.tasks) or 'every task'}) {c.text}" for c in stale]
+    return "\n".join(lines) + "\n"
+
+
+def job_minutes(runs: Iterable[Run]) -> list[float]:
+    """The compute of each distinct job among ``runs`` (minutes; a job's runs share its record)."""
+    return list({r.record: r.minutes for r in runs if not math.isnan(r.minutes)}.values())
+
+
+def folders_of(runs: Iterable[Run]) -> dict:
+    """``(method, robot, setting, task) -> the folders its runs come from``."""
+    found = defaultdict(set)
+    for run in runs:
+        found[(run.method, run.robot, run.setting, run.task)].add(run.folder)
+    return found
+
+
+# --- what a study declares -------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Study:
+    """A study folder under ``results/`` (``name``) and how to read it: its job records (``records``: folders
+    relative to ``results/``, the first that exists is read), else a per-episode table without records
+    (``table``), or a table of rows of its own read in place of records (``rows``, described by ``rows_note``);
+    ``robot``: only this robot's runs; ``reports``: stages whose reports are read from its records;
+    ``archived``: tables without records (``<folder>/comparison.csv``) declared to be of this study's configurations
+    (:func:`hierloco.evidence.adopt_configs`); ``variants`` and ``names``: the method variants its records hold
+    (``{name: {recipe, overrides}}``, as a study's config declares them) and a method's name in the claims where
+    not its own; ``pooled``: its runs of the paper's configurations are pooled with the other studies' of the same
+    configurations.
+
+    Its own page, ``<study>/verdicts.md``, holds ``checks(evidence)`` (none: no page; the hook is called only when
+    the study has runs or rows), each check not found to hold with its cause when ``causes`` (a loader of
+    ``<study>/causes.yaml``) is given; ``paper_column`` heads the column of what the paper says. ``questions``: how
+    ``fragile_claims.md`` names the study's own questions, where it has any (:attr:`Source.questions`). ``order``:
+    where it stands among the studies."""
+
+    name: str
+    _: KW_ONLY
+    command: str
+    order: float
+    records: tuple[str, ...] = ()
+    table: str = ""
+    rows: str = ""
+    rows_note: str = ""
+    robot: str = ""
+    reports: tuple[str, ...] = ()
+    archived: tuple[str, ...] = ()
+    variants: Mapping = field(default_factory=dict, compare=False)
+    names: Mapping = field(default_factory=dict, compare=False)
+    pooled: bool = False
+    checks: Callable | None = field(default=None, compare=False)
+    causes: Callable | None = field(default=None, compare=False)
+    paper_column: str = "the paper"
+    questions: str = ""
+
+
+@dataclass(frozen=True)
+class Source:
+    """A set of checks the paper's claims are decided from, computed once: ``checks(evidence) -> [Check]``.
+
+    ``folder(check)``: the folder under ``results/`` a check's runs come from (default ``name``); ``study(check)``:
+    the runs a new seed adds to, as ``fragile_claims.md`` names them (default ``name``); ``job(evidence, robot,
+    side)``: the job a new seed of ``side`` (a part's name) runs, ``(key, words, minutes of each such job
+    recorded)``, one key per job however many claims ask for it (default: a job of its own, compute unknown);
+    ``folders(evidence)``: for pooled runs, ``(method, robot, setting, task) -> folders`` (:func:`folders_of`);
+    ``sets(evidence)``: the same checks on each set of the project's runs of the same configurations (the verdicts
+    that differ between them make a claim fragile); ``questions(check)``: the checks that are the study's own
+    questions rather than the paper's, listed in ``fragile_claims.md`` when inconclusive; ``note`` and ``pooling``:
+    what ``paper_check.md`` and ``fragile_claims.md`` say about how its runs are pooled. ``order``: where it stands
+    among the sources."""
+
+    name: str
+    _: KW_ONLY
+    order: float
+    checks: Callable = field(compare=False)
+    folder: Callable | None = field(default=None, compare=False)
+    study: Callable | None = field(default=None, compare=False)
+    job: Callable | None = field(default=None, compare=False)
+    folders: Callable | None = field(default=None, compare=False)
+    sets: Callable | None = field(default=None, compare=False)
+    questions: Callable | None = field(default=None, compare=False)
+    note: str = ""
+    pooling: str = ""
+
+    def folder_of(self, check: Check) -> str:
+        return self.folder(check) if self.folder else self.name
+
+    def study_of(self, check: Check) -> str:
+        return self.study(check) if self.study else self.name
+
+    def job_of(self, evidence: "Evidence", robot: str, side: str) -> tuple[tuple | None, str, list[float]]:
+        if self.job is not None:
+            return self.job(evidence, robot, side)
+        return (self.name, side), f"{side} ({self.name})", []
+
+
+@dataclass(frozen=True)
+class Claim:
+    """One claim of the paper: ``words`` (its text, with what ours tests where that differs), ``where`` the paper
+    makes it, ``paper`` the numbers it states (robot and figure); decided by the checks of source ``source`` whose
+    key (before any ``:``) is ``key`` (and that ``select`` keeps, when given). ``note(checks)``: a line the page adds
+    below its table (``checks``: every source's). A claim nothing here can measure has no source, and ``needs``
+    says what it would need. ``order``: its place in the paper."""
+
+    _: KW_ONLY
+    order: float
+    words: str
+    where: str
+    paper: str = "-"
+    source: str = ""
+    key: str = ""
+    select: Callable | None = field(default=None, compare=False)
+    note: Callable | None = field(default=None, compare=False)
+    needs: str = ""
+
+    def chosen(self, checks: dict[str, list[Check]]) -> list[Check]:
+        """The checks that decide it."""
+        return [c for c in checks.get(self.source, []) if c.key.split(":")[0] == self.key
+                and (self.select is None or self.select(c))]
+
+
+@dataclass(frozen=True)
+class Counted:
+    """A statement of the paper about the design, counted rather than tested: ``words`` (ending where the counts
+    follow) and ``count(evidence)``, the counts as phrases (none: not shown). ``order``: its place."""
+
+    _: KW_ONLY
+    order: float
+    words: str
+    count: Callable = field(compare=False)
+
+
+class ClaimRegistry:
+    """The studies, sources, claims and counted statements the studies add (:meth:`add`; each declared with keyword
+    arguments, a study's and a source's name first), each kept in its ``order``. Adding an equal entry again is a
+    no-op; another entry under a taken name raises ``ValueError``."""
+
+    KINDS = {Study: "study", Source: "source", Claim: "claim", Counted: "counted statement"}
+
+    def __init__(self):
+        self._entries: dict[type, dict[str, object]] = {kind: {} for kind in self.KINDS}
+
+    @staticmethod
+    def _name(entry) -> str:
+        return entry.name if isinstance(entry, (Study, Source)) else entry.words
+
+    def add(self, *entries) -> None:
+        for entry in entries:
+            kind = type(entry)
+            if kind not in self.KINDS:
+                raise TypeError(f"a claims registry holds {', '.join(k.__name__ for k in self.KINDS)}, not "
+                                f"{kind.__name__}")
+            name = self._name(entry)
+            known = self._entries[kind].get(name)
+            if known is not None and known is not entry and known != entry:
+                raise ValueError(f"{self.KINDS[kind]} {name!r} is already registered")
+            self._entries[kind][name] = entry
+
+    def remove(self, *entries) -> None:
+        """Removes entries (a test that added a study of its own removes it afterwards)."""
+        for entry in entries:
+            self._entries[type(entry)].pop(self._name(entry), None)
+
+    def _sorted(self, kind: type) -> list:
+        return sorted(self._entries[kind].values(), key=lambda e: (e.order, self._name(e)))
+
+    def studies(self) -> list[Study]:
+        return self._sorted(Study)
+
+    def sources(self) -> list[Source]:
+        return self._sorted(Source)
+
+    def claims(self) -> list[Claim]:
+        return self._sorted(Claim)
+
+    def counted(self) -> list[Counted]:
+        return self._sorted(Counted)
+
+    def variants(self) -> dict:
+        """Every study's method variants (``{name: {recipe, overrides}}``); one name declared two ways raises."""
+        found: dict = {}
+        for study in self.studies():
+            for name, variant in study.variants.items():
+                variant = {"recipe": variant["recipe"], "overrides": list(variant.get("overrides", []))}
+                if found.setdefault(name, variant) != variant:
+                    raise ValueError(f"variant {name!r} is declared as {found[name]} and, by {study.name}, as "
+                                     f"{variant}")
+        return found
+
+    def names(self) -> dict:
+        """Every study's names of methods in the claims (method -> name)."""
+        return {method: name for study in self.studies() for method, name in study.names.items()}
+
+    def discover(self) -> None:
+        """Imports the ``claims`` module of every study that has one and is not imported yet
+        (:data:`hierloco.pipeline.methods.STUDIES`: the recipe folders, the ``hierloco.studies`` entry points and the
+        study folders named in this process); each adds its entries."""
+        from hierloco.pipeline.methods import STUDIES
+
+        for name in STUDIES.names():
+            module = f"{STUDIES[name].package}.claims"
+            if module not in sys.modules and importlib.util.find_spec(module) is not None:
+                importlib.import_module(module)
+
+
+CLAIMS = ClaimRegistry()
+
+
+# --- the evidence --------------------------------------------------------------------------------------------------
+
+@dataclass
+class Evidence:
+    """What the registered studies hold under ``results``: each study's runs (``runs[name]``), its findings (jobs
+    not evaluable), its stages' reports (``reports[name][stage]``), its rows of its own (``rows[name]``), where each
+    was read from (``sources``), the archived tables' runs, the compute of a study without records
+    (``compute_tables[name]``: ``(method, robot) -> minutes per job``), and the studies themselves."""
+
+    results: Path
+    studies: tuple[Study, ...] = ()
+    runs: dict[str, list[Run]] = field(default_factory=dict)
+    findings: dict[str, list[dict]] = field(default_factory=dict)
+    reports: dict[str, dict[str, list[dict]]] = field(default_factory=dict)
+    rows: dict[str, list[dict]] = field(default_factory=dict)
+    sources: dict[str, str] = field(default_factory=dict)
+    archived: list[Run] = field(default_factory=list)
+    compute_tables: dict[str, dict] = field(default_factory=dict)
+
+
+def locate(results: Path, relative: str) -> Path | None:
+    """``results/<relative>``, or the same under ``results/archive/``, or ``None``."""
+    for base in (results, results / "archive"):
+        if (base / relative).exists():
+            return base / relative
+    return None
+
+
+def _shown(path: Path, results: Path) -> str:
+    try:
+        return (Path(results.name) / path.relative_to(results)).as_posix()
+    except ValueError:
+        return path.as_posix()
+
+
+def _wallclock(path: Path) -> dict:
+    """``(method, robot) -> minutes per job`` from a study's ``wallclock.md`` (for a study without records)."""
+    table = {}
+    if path.is_file():
+        for match in re.finditer(r"^\| (\w+) \| (\w+) \| \d+ \| ([\d.]+) \| [\d.]+ \|$", path.read_text(), re.M):
+            table[(match[1], match[2])] = float(match[3])
+    return table
+
+
+def load(results, names: Mapping | None = None, *, registry: ClaimRegistry | None = None) -> Evidence:
+    """Reads every registered study (:meth:`ClaimRegistry.discover` first) and its archived tables under
+    ``results``, each run's method under its name in the claims (``names``: method -> name; default the studies'
+    :attr:`Study.names`)."""
+    from hierloco.results import read_csv
+
+    registry = CLAIMS if registry is None else registry
+    registry.discover()
+    results = Path(results)
+    studies = tuple(registry.studies())
+    variants = registry.variants()
+    evidence = Evidence(results, studies)
+    names = registry.names() if names is None else dict(names)
+    for study in studies:
+        found = next((p for p in (locate(results, r) for r in study.records) if p is not None), None)
+        if study.rows:
+            if (table := locate(results, study.rows)) is not None:
+                evidence.rows[study.name] = [{**row, "robot": study.robot} for row in read_csv(table)]
+                evidence.sources[study.name] = _shown(table, results) + study.rows_note
+        elif found is not None:
+            evidence.runs[study.name] = [r for r in read_records(found, folder=study.name, variants=variants)
+                                         if not study.robot or r.robot == study.robot]
+            evidence.findings[study.name] = read_findings(found, variants=variants)
+            evidence.sources[study.name] = _shown(found, results)
+            for stage in study.reports:
+                evidence.reports.setdefault(study.name, {})[stage] = read_stage_reports(found, stage,
+                                                                                        variants=variants)
+        elif study.table and (table := locate(results, study.table)) is not None:
+            evidence.runs[study.name] = [r for r in read_table(table, folder=study.name)
+                                         if not study.robot or r.robot == study.robot]
+            evidence.findings[study.name] = []
+            evidence.sources[study.name] = _shown(table, results) + " (a table: no records)"
+            if (clock := locate(results, f"{study.name}/wallclock.md")) is not None:
+                evidence.compute_tables[study.name] = _wallclock(clock)
+    for study in studies:
+        reference = evidence.runs.get(study.name, [])
+        for name in study.archived:
+            table = locate(results, f"{name}/comparison.csv")
+            if table is not None:
+                evidence.archived += adopt_configs(read_table(table, folder=name), reference)
+                evidence.sources[name] = (_shown(table, results) + f" (archived table: same configuration as "
+                                          f"{study.name})")
+    if names:
+        evidence.runs = {study: [replace(r, method=names.get(r.method, r.method)) for r in runs]
+                         for study, runs in evidence.runs.items()}
+        evidence.archived = [replace(r, method=names.get(r.method, r.method)) for r in evidence.archived]
+    return evidence
+
+
+__all__ = ["CLAIMS", "Cause", "Check", "Claim", "ClaimRegistry", "Counted", "Evidence", "NOT_MEASURED", "Part",
+           "Source", "Study", "TASKS", "UNDECIDED", "checks_markdown", "counts_line", "decided", "describe",
+           "folders_of", "job_minutes", "load", "load_causes", "locate", "part", "seed_costs", "seed_means"]
