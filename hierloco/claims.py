@@ -74,6 +74,7 @@ class Part:
     decision: stats.Decision
     names: tuple[str, str] = ("", "")   # what a and b are: (method, setting) labels for readers of the check
     options: tuple = ()                 # the test's own options (("min_effect_rel", 0.5),), where not the defaults
+    refute_parts: int = 1               # refuted at alpha / refute_parts (one of that many comparisons of a claim)
 
 
 @dataclass(frozen=True)
@@ -137,26 +138,107 @@ def part(label: str, a, b, kind: str, *, paired: bool = False, parts: int = 1, n
     b = float(b) if np.ndim(b) == 0 else tuple(float(x) for x in b)
     options = dict(options or {})
     return Part(label, a, b, kind, paired, decide(a, b, paired=paired, refute_alpha=stats.ALPHA / parts, **options),
-                tuple(names), tuple(sorted(options.items())))
+                tuple(names), tuple(sorted(options.items())), parts)
 
 
 def decided(key, claim, robot, setting, task, ours, paper, parts: list[Part], figure="") -> Check:
     """A check from its tested parts: one part's verdict, or several combined as :func:`hierloco.stats.decide_all`
     does (each part must hold; any part refuted at alpha / parts refutes)."""
-    verdicts = [p.decision.verdict for p in parts]
-    if len(parts) == 1:
-        verdict = verdicts[0]
-    elif all(v == stats.NOT_TESTABLE for v in verdicts):
-        verdict = stats.NOT_TESTABLE
-    elif stats.DOES_NOT_HOLD in verdicts:
-        verdict = stats.DOES_NOT_HOLD
-    elif all(v == stats.HOLDS for v in verdicts):
-        verdict = stats.HOLDS
-    else:
-        verdict = stats.INCONCLUSIVE
+    verdict = combined([p.decision.verdict for p in parts])
     detail = parts[0].decision.reason if len(parts) == 1 else "; ".join(f"{p.label}: {p.decision.text()}"
                                                                         for p in parts)
     return Check(key, claim, robot, setting, task, ours, paper, verdict, detail, figure, tuple(parts))
+
+
+def combined(verdicts: list[str]) -> str:
+    """The verdict of a claim from its parts' (:func:`decided`)."""
+    if len(verdicts) == 1:
+        return verdicts[0]
+    if all(v == stats.NOT_TESTABLE for v in verdicts):
+        return stats.NOT_TESTABLE
+    if stats.DOES_NOT_HOLD in verdicts:
+        return stats.DOES_NOT_HOLD
+    if all(v == stats.HOLDS for v in verdicts):
+        return stats.HOLDS
+    return stats.INCONCLUSIVE
+
+
+# --- how firm a verdict is: its p-values, multiplicity, the pre-planned seeds, the thresholds ------------------------
+
+PLANNED_SEEDS = 3   # the seeds every study planned (0, 1, 2); seeds 3-4 were added where a verdict looked fragile
+
+
+def p_values(check: Check) -> tuple[float | None, float | None]:
+    """``(p that establishes it, p that refutes it)`` of a check: establishing, the largest of its parts' p (an
+    intersection-union test holds when every part does); refuting, the smallest part's refuting p times the number
+    of comparisons it is refuted among (Bonferroni, as :func:`decided` refutes), at most 1. ``None`` where a part
+    has no p (not testable, too few seeds)."""
+    live = [p for p in check.parts if p.decision.verdict != stats.NOT_TESTABLE]
+    establish = [p.decision.p for p in live]
+    refute = [None if p.decision.p_refute is None else min(1.0, p.decision.p_refute * p.refute_parts) for p in live]
+    p_establish = max(establish) if establish and None not in establish else None
+    p_refute = min((r for r in refute if r is not None), default=None)
+    return p_establish, p_refute
+
+
+def deciding_p(check: Check) -> float | None:
+    """The p-value that decided the verdict: the refuting one for "does not hold", else the establishing one."""
+    p_establish, p_refute = p_values(check)
+    return p_refute if check.verdict == stats.DOES_NOT_HOLD else p_establish
+
+
+def corrected(checks: list[Check], *, adjust: Callable = stats.holm, alpha: float = stats.ALPHA) -> list[str]:
+    """The verdicts of a family of checks (one claim of the paper; one study) after a multiplicity correction
+    (``adjust``: :func:`hierloco.stats.holm` or :func:`hierloco.stats.benjamini_hochberg`): the establishing p-values
+    of the family are adjusted together, and the refuting ones together; "holds" stays when its adjusted
+    establishing p is below ``alpha``, "does not hold" when its adjusted refuting p is, every other verdict stays,
+    and a verdict that does not stay becomes inconclusive. The correction only ever weakens a verdict."""
+    pairs = [p_values(c) for c in checks]
+    adjusted = []
+    for side in (0, 1):
+        index = [i for i, pair in enumerate(pairs) if pair[side] is not None]
+        values = dict(zip(index, adjust([pairs[i][side] for i in index]))) if index else {}
+        adjusted.append(values)
+    out = []
+    for i, check in enumerate(checks):
+        if check.verdict == stats.HOLDS and not adjusted[0].get(i, 1.0) < alpha:
+            out.append(stats.INCONCLUSIVE)
+        elif check.verdict == stats.DOES_NOT_HOLD and not adjusted[1].get(i, 1.0) < alpha:
+            out.append(stats.INCONCLUSIVE)
+        else:
+            out.append(check.verdict)
+    return out
+
+
+def is_borderline(check: Check, corrected_verdict: str | None = None) -> bool:
+    """A verdict is borderline when its deciding p lies in :data:`hierloco.stats.BORDERLINE` (a "holds" or a "does
+    not hold" at ``0.01 <= p < 0.05``), or when the multiplicity correction changes it."""
+    if check.verdict not in (stats.HOLDS, stats.DOES_NOT_HOLD):
+        return False
+    return stats.borderline(deciding_p(check)) or (corrected_verdict is not None
+                                                   and corrected_verdict != check.verdict)
+
+
+def redecided(check: Check, *, seeds: int | None = None, **options) -> str:
+    """The check's verdict decided again: on the first ``seeds`` seeds of each side (the seeds in order; ``None``:
+    all) and/or with other thresholds (``options``: ``min_effect_rel``, ``min_effect_abs``, ``margin_rel``,
+    ``margin_abs``; a part's own options win where it has them)."""
+    verdicts = []
+    for p in check.parts:
+        a = p.a[:seeds] if seeds else p.a
+        b = p.b if np.ndim(p.b) == 0 or not seeds else p.b[:seeds]
+        own = dict(p.options)
+        keys = ("min_effect_rel", "min_effect_abs") if p.kind == "better" else ("margin_rel", "margin_abs")
+        chosen = {**{k: v for k, v in options.items() if k in keys}, **own}
+        verdicts.append(part(p.label, a, b, p.kind, paired=p.paired, parts=p.refute_parts, names=p.names,
+                             options=chosen).decision.verdict)
+    return combined(verdicts) if verdicts else check.verdict
+
+
+def planned(check: Check) -> str | None:
+    """The verdict at the pre-planned :data:`PLANNED_SEEDS` seeds (seeds 0-2) where a side has more, else ``None``."""
+    more = any(len(v) > PLANNED_SEEDS for p in check.parts for v in (p.a, p.b) if np.ndim(v))
+    return redecided(check, seeds=PLANNED_SEEDS) if more else None
 
 
 @dataclass(frozen=True)
@@ -233,12 +315,29 @@ def counts_line(checks) -> str:
     return ", ".join(f"{n} {names[v]}" for v, n in tally.items())
 
 
+def verdict_text(check: Check, corrected_verdict: str | None = None, *, bold: bool = False) -> str:
+    """The verdict with the p-value that decided it and, where it is, "borderline" (:func:`is_borderline`), e.g.
+    ``"holds (p = 0.0498; borderline)"`` (``bold``: the verdict alone in bold)."""
+    p = deciding_p(check) if check.verdict in (stats.HOLDS, stats.DOES_NOT_HOLD, stats.INCONCLUSIVE) else None
+    which = "refuting " if check.verdict == stats.DOES_NOT_HOLD else ""
+    notes = ([f"{which}p = {p:.3g}"] if p is not None else []) + \
+        (["borderline"] if is_borderline(check, corrected_verdict) else [])
+    return (f"**{check.verdict}**" if bold else check.verdict) + (f" ({'; '.join(notes)})" if notes else "")
+
+
+def counts_line_of(verdicts: list[str]) -> str:
+    """:func:`counts_line` of bare verdicts."""
+    return counts_line([Check("", "", "", "", "", "", "", v) for v in verdicts])
+
+
 def checks_markdown(checks: list[Check], *, title: str, criteria: str, paper_column: str, causes: list[Cause] = (),
-                    with_causes: bool = True) -> str:
+                    with_causes: bool = True, family: bool = False) -> str:
     """The checks as a Markdown page (a study's ``paper_check.md``), each claim not found to hold (does not hold,
     inconclusive, not testable here) with its numbered cause from ``causes`` (the first that covers it) or "not
     checked". ``criteria`` says what the verdicts mean; ``paper_column`` heads the column of what the paper says;
-    ``with_causes=False`` leaves the causes out (a study that keeps none)."""
+    ``with_causes=False`` leaves the causes out (a study that keeps none); ``family``: each verdict with its deciding
+    p, borderline marked, and the verdict after Holm's correction over the checks as one family (:func:`corrected`)
+    and at the pre-planned seeds (:func:`planned`) beside it."""
     numbers: dict[Cause, int] = {}
 
     def cause_of(check: Check) -> str:
@@ -249,18 +348,23 @@ def checks_markdown(checks: list[Check], *, title: str, criteria: str, paper_col
             return "not checked"
         return f"[{numbers.setdefault(cause, len(numbers) + 1)}](#cause-{numbers[cause]})"
 
+    holm = corrected(checks) if family else []
+    extra = " Holm (family: this page) | at seeds 0-2 |" if family else ""
     lines = [f"# The paper's claims, checked\n\n{title}. Normalised cost, mean +- std over seeds (each seed's mean "
              f"over its targets); a fallen robot's cost counts as 1. {criteria}\n",
-             f"| claim | robot | setting | task | ours | {paper_column} | verdict | test |"
+             f"| claim | robot | setting | task | ours | {paper_column} | verdict | test |" + extra
              + (" cause |" if with_causes else ""),
-             "|---|---|---|---|---|---|---|---|" + ("---|" if with_causes else "")]
-    lines += [f"| {c.claim} | {c.robot} | {c.setting} | {c.task} | {c.ours} | {c.paper} | {c.verdict} | "
-              f"{c.detail or '-'} |" + (f" {cause_of(c)} |" if with_causes else "") for c in checks]
+             "|---|---|---|---|---|---|---|---|" + ("---|---|" if family else "") + ("---|" if with_causes else "")]
+    lines += [f"| {c.claim} | {c.robot} | {c.setting} | {c.task} | {c.ours} | {c.paper} | "
+              f"{verdict_text(c, holm[i]) if family else c.verdict} | {c.detail or '-'} |"
+              + (f" {holm[i]} | {planned(c) or 'same seeds'} |" if family else "")
+              + (f" {cause_of(c)} |" if with_causes else "") for i, c in enumerate(checks)]
     open_ = [c for c in checks if c.verdict in UNDECIDED]
     unexplained = sum(cause_of(c) == "not checked" for c in open_)
-    lines.append(f"\n{counts_line(checks)}" + (f" ({len(open_) - unexplained} of the {len(open_)} not found to hold "
-                                                f"with the cause we checked, {unexplained} not checked)."
-                                                if with_causes else "."))
+    after = f"; after Holm's correction over the page: {counts_line_of(holm)}" if family else ""
+    lines.append(f"\n{counts_line(checks)}{after}" + (f" ({len(open_) - unexplained} of the {len(open_)} not found to "
+                                                       f"hold with the cause we checked, {unexplained} not checked)."
+                                                       if with_causes else "."))
     if numbers:
         lines.append("\n## The causes we checked\n")
         lines += [f"<a id=\"cause-{n}\"></a>{n}. {cause.text}\n" for cause, n in numbers.items()]
@@ -370,8 +474,9 @@ class Claim:
     """One claim of the paper: ``words`` (its text, with what ours tests where that differs), ``where`` the paper
     makes it, ``paper`` the numbers it states (robot and figure); decided by the checks of source ``source`` whose
     key (before any ``:``) is ``key`` (and that ``select`` keeps, when given). ``note(checks)``: a line the page adds
-    below its table (``checks``: every source's). A claim nothing here can measure has no source, and ``needs``
-    says what it would need. ``order``: its place in the paper."""
+    below its table (``checks``: every source's). A claim nothing here can measure has no source, ``needs``
+    says what it would need (or what is measured of it outside a test), and ``status`` whether it is "not measured
+    yet" or "not testable here". ``order``: its place in the paper."""
 
     _: KW_ONLY
     order: float
@@ -383,6 +488,7 @@ class Claim:
     select: Callable | None = field(default=None, compare=False)
     note: Callable | None = field(default=None, compare=False)
     needs: str = ""
+    status: str = "not measured yet"   # a claim with no source: "not measured yet", or "not testable here" (why: needs)
 
     def chosen(self, checks: dict[str, list[Check]]) -> list[Check]:
         """The checks that decide it."""
@@ -571,5 +677,7 @@ def load(results, names: Mapping | None = None, *, registry: ClaimRegistry | Non
 
 
 __all__ = ["CLAIMS", "Cause", "Check", "Claim", "ClaimRegistry", "Counted", "Evidence", "NOT_MEASURED", "Part",
+           "PLANNED_SEEDS", "combined", "corrected", "counts_line_of", "deciding_p", "is_borderline", "p_values",
+           "planned", "redecided", "verdict_text",
            "Source", "Study", "TASKS", "UNDECIDED", "checks_markdown", "counts_line", "decided", "describe",
            "folders_of", "job_minutes", "load", "load_causes", "locate", "part", "seed_costs", "seed_means"]

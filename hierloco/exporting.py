@@ -20,9 +20,11 @@ file stem                  inputs -> outputs (float32)                          
 =========================  ===========================================================  ============================
 
 The dynamics model is any model of the registry :data:`hierloco.components.com_model.MODELS` (its checkpoint names
-it): the paper's MLP, or the probabilistic ensemble, whose exported prediction is its members' mean (the planner's
-scoring with that mean) and which also exports every member's prediction (``com_model_members``, M members), for a
-risk-aware planner on the robot.
+it, with the options it was trained with, which the manifest's ``dynamics_model`` records; a model named by import
+path is imported only when ``trust_imports`` lists it): the paper's MLP, a user's
+:class:`~hierloco.components.com_model.CoMModel`, or the probabilistic ensemble, whose exported prediction is its
+members' mean (the planner's scoring with that mean) and which also exports every member's prediction
+(``com_model_members``, M members), for a risk-aware planner on the robot.
 
 CoM states are world-frame ``(x, y, yaw, vx, vy)`` in m, rad, m/s. The scoring rolls the model ``H`` actions ahead
 and sums the task cost ``w1 |target - .| + w2 |yaw_target - yaw|`` of every step (``[w1, w2] = [2, 1]``, the yaw
@@ -31,7 +33,7 @@ trajectory tracking (target: the reference point of each step). For LIB runs the
 expert vector (``A = G``), for IK the velocity command; runs without a gait policy (LIB, IK) export only the model.
 ``manifest.json`` (written last) describes every file: inputs and outputs with shapes and units, the latent box,
 the expert latents, the robot's joint order, and the measured agreement with PyTorch. From a shell:
-``python -m hierloco.exporting RUN_DIR OUT_DIR [--setting legs_disabled]``.
+``python -m hierloco.exporting RUN_DIR OUT_DIR [--setting legs_disabled] [--trust-import pkg.module:Class]``.
 
 Example:
     >>> import tempfile, numpy as np, onnxruntime
@@ -66,11 +68,12 @@ import numpy as np
 import torch
 from torch import nn
 
-from hierloco.components.com_model import CoMDynamicsModel, TrainedCoMModel, model_name
+from hierloco.components.com_model import CoMDynamicsModel, CoMModel, TrainedCoMModel, model_name
 from hierloco.components.gait_policy import LatentGaitPolicy, TrainedGaitPolicy
 from hierloco.envs.robots import CONTROL_TIMESTEP, get_robot
 from hierloco.envs.tasks import GoalReaching, Task, VelocityTracking, W_POSITION, W_YAW
 from hierloco.io import ArtifactError, atomic_path, load_arrays, load_yaml, write_text
+from hierloco.registry import is_import_path
 
 MANIFEST_FORMAT = 1
 DEFAULT_OPSET = 18
@@ -104,7 +107,7 @@ class GaitPolicyStep(nn.Module):
 class CoMPredict(nn.Module):
     """``com_state`` ``B x 5`` and ``action`` ``B x A`` -> the world-frame ``next_com_state`` ``B x 5``."""
 
-    def __init__(self, model: CoMDynamicsModel):
+    def __init__(self, model: CoMModel):
         super().__init__()
         self.model = model
 
@@ -128,7 +131,7 @@ class CoMPlannerStep(nn.Module):
     """``com_state`` ``B x 5`` and ``candidates`` ``B x S x A`` -> next states ``B x S x 5``: the model step with
     which the planner imagines S candidate actions from each of B states."""
 
-    def __init__(self, model: CoMDynamicsModel):
+    def __init__(self, model: CoMModel):
         super().__init__()
         self.model = model
 
@@ -149,7 +152,7 @@ class TaskScoring(nn.Module):
         torch.Size([3, 50])
     """
 
-    def __init__(self, model: CoMDynamicsModel, task: Task):
+    def __init__(self, model: CoMModel, task: Task):
         super().__init__()
         self.model = model
         self.task = task
@@ -283,7 +286,7 @@ def _random_states(generator, batch: int) -> torch.Tensor:
 
 
 def export_run(run_dir: str | os.PathLike, out_dir: str | os.PathLike, *, setting: str = "normal",
-               horizon: int | None = None, opset: int = DEFAULT_OPSET, seed: int = 0) -> dict:
+               horizon: int | None = None, opset: int = DEFAULT_OPSET, seed: int = 0, trust_imports=()) -> dict:
     """Exports what a run directory holds for deployment; returns the manifest (also ``out_dir/manifest.json``).
 
     Args:
@@ -294,6 +297,8 @@ def export_run(run_dir: str | os.PathLike, out_dir: str | os.PathLike, *, settin
         setting: which dynamics model, ``"normal"`` or ``"legs_disabled"`` (the adverse setting).
         horizon: H of the exported scoring; default the run's ``planner.horizon`` (``config.yaml``), else 1.
         opset: the ONNX opset. seed: seeds the random inputs of the checks.
+        trust_imports: import paths (``pkg.module:Class``) the model's checkpoint may name (imported then); a run
+            directory's files are data, so any other import path in them is refused.
 
     Raises:
         ValueError: no such run directory, no artifact to export, a bad horizon or opset, artifacts that do not
@@ -307,13 +312,15 @@ def export_run(run_dir: str | os.PathLike, out_dir: str | os.PathLike, *, settin
         raise ValueError(f"setting must be a name such as 'normal' or 'legs_disabled', got {setting!r}")
     if isinstance(opset, bool) or not isinstance(opset, int) or not 13 <= opset <= 23:
         raise ValueError(f"opset must be an ONNX opset between 13 and 23, got {opset!r}")
+    if isinstance(trust_imports, str) or not all(is_import_path(item) for item in trust_imports):
+        raise ValueError(f"trust_imports must list import paths ('pkg.module:Class'), got {trust_imports!r}")
     policy_path, model_path = run_dir / "gait_policy.pt", run_dir / f"dynamics_model_{setting}.pt"
     if not policy_path.exists() and not model_path.exists():
         others = sorted(p.name for p in run_dir.glob("dynamics_model_*.pt"))
         hint = f" (it has {', '.join(others)}: pass that setting)" if others else ""
         raise ValueError(f"{run_dir} holds nothing to export: neither gait_policy.pt nor {model_path.name}{hint}")
     trained_policy = TrainedGaitPolicy.load(policy_path) if policy_path.exists() else None
-    trained_model = TrainedCoMModel.load(model_path) if model_path.exists() else None
+    trained_model = TrainedCoMModel.load(model_path, trust_imports=trust_imports) if model_path.exists() else None
     low_level = _read_low_level(run_dir, setting) if trained_model is not None else None
     config = _read_run_config(run_dir)
     if horizon is None:
@@ -398,7 +405,7 @@ def export_run(run_dir: str | os.PathLike, out_dir: str | os.PathLike, *, settin
         manifest["com_state"] = {"names": ["x", "y", "yaw", "vx", "vy"], "units": ["m", "m", "rad", "m/s", "m/s"],
                                  "frame": "world"}
         manifest["dynamics_model"] = {"model": model_name(model),
-                                      "options": {k: v for k, v in model.config().items() if k != "action_dim"},
+                                      "options": model.options,
                                       **{k: trained_model.metadata.get(k) for k in
                                          ("heldout_rmse", "output_names", "num_train", "duration")}}
         box_low, box_high = _action_box(low_level, a_dim)
@@ -482,7 +489,8 @@ __all__ = ["CoMMembers", "CoMPlannerStep", "CoMPredict", "GaitPolicyPattern", "G
 
 
 def main(argv=None) -> int:
-    """``python -m hierloco.exporting RUN_DIR OUT_DIR [--setting legs_disabled] [--horizon H]``; exit 1 on bad input."""
+    """``python -m hierloco.exporting RUN_DIR OUT_DIR [--setting legs_disabled] [--horizon H] [--trust-import P]``;
+    exit 1 on bad input."""
     import argparse
     import sys
 
@@ -492,9 +500,12 @@ def main(argv=None) -> int:
     parser.add_argument("out_dir")
     parser.add_argument("--setting", default="normal", help="normal or legs_disabled: which dynamics model")
     parser.add_argument("--horizon", type=int, default=None, help="H of the exported scoring (default: the run's)")
+    parser.add_argument("--trust-import", action="append", default=[], metavar="PKG.MODULE:CLASS",
+                        help="an import path the run's model checkpoint may name (repeatable)")
     args = parser.parse_args(argv)
     try:
-        manifest = export_run(args.run_dir, args.out_dir, setting=args.setting, horizon=args.horizon)
+        manifest = export_run(args.run_dir, args.out_dir, setting=args.setting, horizon=args.horizon,
+                              trust_imports=args.trust_import)
     except ValueError as error:
         print(f"hierloco.exporting: {error}", file=sys.stderr)
         return 1

@@ -26,13 +26,19 @@ from hierloco.io import atomic_path
 def render_frames(robot: str | RobotSpec, qpos: np.ndarray, *, width: int = 320, height: int = 240,
                   distance: float | None = None, elevation: float = -25.0, azimuth: float = 135.0,
                   disabled_legs: Sequence[str] = (), markers: np.ndarray | None = None,
-                  obstacles: Sequence = ()) -> np.ndarray:
+                  obstacles: Sequence = (), terrain=None) -> np.ndarray:
     """Renders ``T x nq`` generalised positions with a camera tracking the base; returns ``T x H x W x 3`` uint8.
 
-    ``markers`` (``M x 2``, world-frame XY in m) draws small spheres on the floor, e.g. goals or a path.
+    ``markers`` (``M x 2``, world-frame XY in m) draws small spheres on the ground, e.g. goals or a path.
+    ``terrain`` is the ground the positions were simulated on (a name, a mapping of options or a built
+    :class:`hierloco.envs.terrain.Terrain`, ``docs/terrain.md``; default flat): it is drawn, and the markers and
+    obstacles stand on it.
     """
+    from hierloco.envs.terrain import make_terrain
+
     robot = get_robot(robot)
-    model = compile_model(robot, disabled_legs, obstacles)
+    terrain = make_terrain(terrain)
+    model = compile_model(robot, disabled_legs, obstacles, terrain=terrain)
     qpos = np.asarray(qpos, dtype=np.float64)
     if qpos.ndim != 2 or qpos.shape[1] != model.nq:
         raise ValueError(f"qpos must be T x {model.nq} for {robot.name}, got {qpos.shape}")
@@ -54,16 +60,34 @@ def render_frames(robot: str | RobotSpec, qpos: np.ndarray, *, width: int = 320,
             camera.lookat[:] = data.xpos[base]
             renderer.update_scene(data, camera=camera)
             if markers is not None:
-                _add_markers(renderer.scene, np.asarray(markers))
+                _add_markers(renderer.scene, np.asarray(markers), terrain)
             frames[t] = renderer.render()
     return frames
 
 
-def _add_markers(scene: mujoco.MjvScene, points: np.ndarray) -> None:
-    for x, y in points[: max(0, scene.maxgeom - scene.ngeom)]:
+def _add_markers(scene: mujoco.MjvScene, points: np.ndarray, terrain=None) -> None:
+    points = points[: max(0, scene.maxgeom - scene.ngeom)]
+    ground = (np.maximum(terrain.height_at(points[:, 0], points[:, 1]), 0.0) if terrain is not None and len(points)
+              else np.zeros(len(points)))
+    for (x, y), z in zip(points, ground):
         mujoco.mjv_initGeom(scene.geoms[scene.ngeom], mujoco.mjtGeom.mjGEOM_SPHERE, np.array([0.03, 0, 0]),
-                            np.array([x, y, 0.03]), np.eye(3).ravel(), np.array([1.0, 0.8, 0.1, 1.0], np.float32))
+                            np.array([x, y, z + 0.03]), np.eye(3).ravel(), np.array([1.0, 0.8, 0.1, 1.0], np.float32))
         scene.ngeom += 1
+
+
+def render_terrain(terrain, robot: str | RobotSpec = "a1", *, width: int = 480, height: int = 360,
+                   distance: float = 6.0, elevation: float = -30.0, azimuth: float = 135.0) -> np.ndarray:
+    """One picture (``H x W x 3`` uint8) of a terrain (a name, a mapping of options or a built
+    :class:`hierloco.envs.terrain.Terrain`) from above at an angle, looking at the start, with ``robot`` standing
+    there for scale (``docs/terrain.md``)."""
+    from hierloco.envs.terrain import make_terrain, standing_qpos_on
+
+    robot = get_robot(robot)
+    terrain = make_terrain(terrain)
+    model = compile_model(robot, terrain=terrain)
+    qpos = standing_qpos_on(terrain, model, robot)
+    return render_frames(robot, qpos[None], width=width, height=height, distance=distance, elevation=elevation,
+                         azimuth=azimuth, terrain=terrain)[0]
 
 
 def save_video(frames: np.ndarray, path: str | os.PathLike, fps: int = 25) -> None:

@@ -233,6 +233,7 @@ class Decision:
     n: tuple[int, ...] = ()
     method: str = "welch"
     reason: str = ""
+    p_refute: float | None = None   # the p-value of the test that would refute it (compared with refute_alpha)
 
     def text(self) -> str:
         """The verdict with its reason, e.g. ``"holds (d = 0.34 [0.29, 0.39], p = 0.0004, min effect 0.05)"``."""
@@ -303,8 +304,9 @@ def decide_better(a: Sequence[float], b: Sequence[float] | float, *, alpha: floa
         a, b, levels=(1 - 2 * alpha, 1 - 2 * refute_alpha), paired=paired, method=method, seed=seed, sign=-1.0)
     p = d.p_greater(0.0) if method == "welch" else None
     where = f"d = {d.estimate:.3f} [{low:.3f}, {high:.3f}]" + (f", p = {p:.3g}" if p is not None else "")
+    p_refute = d.p_less(delta) if method == "welch" else None   # H0: d >= delta; refuted when the upper end < delta
     common = dict(kind="better", estimate=d.estimate, low=low, high=high, p=p, threshold=delta,
-                  n=(_count(a), _count(b)), method=method)
+                  n=(_count(a), _count(b)), method=method, p_refute=p_refute)
     if low > 0 and d.estimate >= delta:
         return Decision(HOLDS, reason=f"{where}; min effect {delta:.3f}", **common)
     if refute_high < delta:
@@ -338,8 +340,10 @@ def decide_close(a: Sequence[float], ref: Sequence[float] | float, *, alpha: flo
         a, ref, levels=(1 - 2 * alpha, 1 - refute_alpha), paired=paired, method=method, seed=seed)
     p = max(d.p_greater(-margin), d.p_less(margin)) if method == "welch" else None
     where = f"d = {d.estimate:+.3f} [{low:+.3f}, {high:+.3f}]" + (f", TOST p = {p:.3g}" if p is not None else "")
+    # refuted when the 1 - refute_alpha interval lies outside [-m, m]: either one-sided test at refute_alpha / 2
+    p_refute = min(1.0, 2.0 * min(d.p_greater(margin), d.p_less(-margin))) if method == "welch" else None
     common = dict(kind="close", estimate=d.estimate, low=low, high=high, p=p, threshold=margin,
-                  n=(_count(a), _count(ref)), method=method)
+                  n=(_count(a), _count(ref)), method=method, p_refute=p_refute)
     if -margin < low and high < margin:
         return Decision(HOLDS, reason=f"{where}; margin {margin:.3f}", **common)
     if refute_low > margin or refute_high < -margin:
@@ -376,6 +380,53 @@ def decide_all(parts: Sequence[tuple], decide: Callable[..., Decision], **option
         return Decision(HOLDS, kind, reason=f"all {len(parts)} parts hold"), decisions
     return Decision(INCONCLUSIVE, kind, reason=", ".join(f"{verdicts.count(v)} {v}" for v in VERDICTS
                                                           if verdicts.count(v))), decisions
+
+
+# --- many claims: multiplicity, borderline verdicts -------------------------------------------------------------------
+
+BORDERLINE = (0.01, ALPHA)   # a verdict whose deciding p-value lies in [0.01, alpha) is borderline
+
+
+def holm(p_values: Sequence[float]) -> list[float]:
+    """Holm's step-down adjusted p-values of a family of tests (controls the family-wise error rate): sorted
+    ascending, the i-th (from 0) is ``max_{j <= i} min(1, (m - j) p_(j))``; returned in the order given. A test of the
+    family is significant at ``alpha`` when its adjusted p-value is below ``alpha``.
+
+        >>> holm([0.01, 0.04, 0.03, 0.005])
+        [0.03, 0.06, 0.06, 0.02]
+    """
+    p = [float(x) for x in p_values]
+    m, adjusted, running = len(p), [0.0] * len(p), 0.0
+    for rank, i in enumerate(sorted(range(m), key=lambda i: p[i])):
+        running = max(running, min(1.0, (m - rank) * p[i]))
+        adjusted[i] = round(running, 12)
+    return adjusted
+
+
+def benjamini_hochberg(p_values: Sequence[float]) -> list[float]:
+    """Benjamini-Hochberg adjusted p-values (q-values; controls the false discovery rate): sorted ascending, the
+    i-th (from 1) is ``min_{j >= i} min(1, m p_(j) / j)``; returned in the order given.
+
+        >>> benjamini_hochberg([0.01, 0.04, 0.03, 0.005])
+        [0.02, 0.04, 0.04, 0.02]
+    """
+    p = [float(x) for x in p_values]
+    m, adjusted, running = len(p), [0.0] * len(p), 1.0
+    order = sorted(range(m), key=lambda i: p[i])
+    for rank in range(m, 0, -1):
+        i = order[rank - 1]
+        running = min(running, min(1.0, m * p[i] / rank))
+        adjusted[i] = round(running, 12)
+    return adjusted
+
+
+def borderline(p: float | None, *, alpha: float = ALPHA, low: float = BORDERLINE[0]) -> bool:
+    """Whether a verdict decided by p-value ``p`` at level ``alpha`` is borderline: ``low <= p < alpha``.
+
+        >>> borderline(0.0498), borderline(0.004), borderline(0.2), borderline(None)
+        (True, False, False, False)
+    """
+    return p is not None and low <= p < alpha
 
 
 # --- how many seeds would decide it --------------------------------------------------------------------------------
@@ -445,7 +496,8 @@ def seeds_needed(a: Sequence[float], b: Sequence[float] | float, *, target: floa
     return None
 
 
-__all__ = ["ALPHA", "BOOTSTRAP_SAMPLES", "DOES_NOT_HOLD", "Decision", "Difference", "EQUIV_MARGIN_ABS",
+__all__ = ["ALPHA", "BOOTSTRAP_SAMPLES", "BORDERLINE", "benjamini_hochberg", "borderline", "holm", "DOES_NOT_HOLD",
+           "Decision", "Difference", "EQUIV_MARGIN_ABS",
            "EQUIV_MARGIN_REL", "HOLDS", "INCONCLUSIVE", "MIN_EFFECT_ABS", "MIN_EFFECT_REL", "NOT_TESTABLE",
            "NOT_TESTABLE_COST", "POWER", "VERDICTS", "bootstrap_interval", "decide_all", "decide_better",
            "decide_close", "power", "seeds_needed", "t_cdf", "t_ppf", "t_two_sided_p", "welch", "welch_t_test"]

@@ -5,7 +5,8 @@ research code, the trained low level, the learned CoM world model of a setting a
 running any recipe code. :func:`make_world_model` is the factory the recipes use too.
 
 Example:
-    >>> run = load_run("outputs/lat/paper/a1_seed0")  # doctest: +SKIP
+    >>> from hierloco.envs import GoalReaching
+    >>> run = load_run("outputs/lat/paper/a1_seed0")   # a trained run's folder
     >>> low_level = run.low_level()                    # pi(., z), for any number of robots
     >>> planner = run.planner(GoalReaching())          # random shooting over z with the learned model
 
@@ -34,7 +35,7 @@ MANIFEST = "run.json"
 
 def make_world_model(model, low_level, *, task=None, device: str = "cpu"):
     """The :class:`~hierloco.envs.world_model.CoMWorldModelEnv` of a trained CoM ``model`` (a
-    :class:`~hierloco.components.com_model.CoMDynamicsModel`) over ``low_level``'s action space (a box, or a finite
+    :class:`~hierloco.components.com_model.CoMModel`) over ``low_level``'s action space (a box, or a finite
     set of choices with the low level's action features)."""
     from hierloco.envs.world_model import CoMWorldModelEnv
 
@@ -114,20 +115,13 @@ class TrainedRun:
 
     def com_model(self, setting: str = "normal", device: str | None = None):
         """The trained :class:`~hierloco.components.com_model.TrainedCoMModel` of ``setting``, its model on
-        ``device`` (default the run's)."""
-        from torch import nn
-
-        from hierloco.components.com_model import CHECKPOINT_FORMAT, CHECKPOINT_KIND, MODELS, TrainedCoMModel
-        from hierloco.io import load_checkpoint
+        ``device`` (default the run's): the class its checkpoint names (a model named by import path only when
+        ``trust_imports`` lists it), built with the options it was trained with."""
+        from hierloco.components.com_model import TrainedCoMModel
 
         if setting not in self.settings:
             raise ValueError(f"{self.path} was trained for settings {self.settings}, not {setting!r}")
-        path = self.artifact(f"dynamics_model_{setting}.pt")
-        if self.trust_imports:  # the model class the checkpoint names, imported if the caller trusts it
-            name = load_checkpoint(path, CHECKPOINT_KIND, CHECKPOINT_FORMAT).get("model")
-            if is_import_path(name):
-                self._part(MODELS, name, f"{path.name}: model", nn.Module)
-        trained = TrainedCoMModel.load(path)
+        trained = TrainedCoMModel.load(self.artifact(f"dynamics_model_{setting}.pt"), trust_imports=self.trust_imports)
         trained.model.to(self._device(device))
         return trained
 

@@ -1,6 +1,6 @@
-"""Extension points from user code: the four worked examples of ``docs/extending.md`` run as written (each under 40
-lines), a planner and a task type from user modules are used by the recipes' command line with nothing else
-changed, and an option added at its default keeps the keys of a recorded job."""
+"""Extension points from user code: the five worked examples of ``docs/extending.md`` run as written (each under 40
+lines), a planner, a task type and a dynamics model from user modules are used by the recipes' command line with
+nothing else changed, and an option added at its default keeps the keys of a recorded job."""
 
 import contextlib
 import importlib
@@ -44,9 +44,9 @@ def user_modules(tmp_path_factory):
     sys.path.remove(str(folder))
 
 
-def test_the_doc_has_four_examples_each_under_40_lines():
+def test_the_doc_has_five_examples_each_under_40_lines():
     python = blocks("python")
-    assert len(python) == 4 and len(blocks("bash")) == 2
+    assert len(python) == 6 and len(blocks("bash")) == 3
     assert all(len([line for line in code.splitlines() if line.strip()]) < 40 for code in python)
 
 
@@ -82,6 +82,35 @@ def test_example_4_a_planner_from_a_user_module_runs_from_the_command_line(copy_
                             env={"PYTHONPATH": f"{ROOT}:{folder}"})
     assert result.returncode == 0, result.stderr[-3000:]
     assert (copy_run / "evaluations" / "grid" / "results.csv").is_file()
+
+
+def test_example_5_a_dynamics_model_from_a_user_module_trains_and_reloads_with_its_option(copy_run, tmp_path,
+                                                                                        monkeypatch):
+    """``my_models.py`` of the doc trains in the bash block's run (a copy of the tiny run stands for
+    ``runs/resmlp``: only its dynamics model and evaluations are new), which evaluates again trusting it; in a
+    process that never imported it, the python block prints what its comment says: the option it was trained with."""
+    from hierloco.components.com_model import MODELS
+
+    folder = tmp_path / "user"
+    folder.mkdir()
+    (folder / "my_models.py").write_text(blocks("python")[4])
+    monkeypatch.syspath_prepend(str(folder))  # PYTHONPATH=.
+    for stale in ("dynamics_model_normal.pt", "dynamics_model_normal.pt.key.json"):
+        (copy_run / stale).unlink()
+    try:
+        for line in blocks("bash")[2].replace("\\\n", " ").splitlines():
+            _, _, command, *arguments = line.replace("runs/resmlp", str(copy_run)).split()  # PYTHONPATH=. hierloco
+            script = arguments.pop(0) if command == "train" else "evaluate.py"
+            result = run_in_process(script, *arguments, "eval.videos=[]", cwd=folder)
+            assert result.returncode == 0, result.stderr[-3000:]
+        MODELS.unregister("my_models:ResMLP")  # as in a fresh process: nothing imported
+        sys.modules.pop("my_models")
+        code = blocks("python")[5]
+        printed = run_example(code.replace('"runs/resmlp"', repr(str(copy_run))), copy_run)
+        assert printed.strip() == re.search(r"# (ResMLP .*)", code).group(1).strip()
+    finally:
+        MODELS.unregister("my_models:ResMLP")
+        sys.modules.pop("my_models", None)
 
 
 def test_a_user_planner_finds_the_known_optimum_and_checks_its_options(user_modules):

@@ -237,3 +237,30 @@ def test_the_docstring_examples_run():
     import hierloco.stats
 
     assert doctest.testmod(hierloco.stats).failed == 0
+
+
+def test_holm_and_benjamini_hochberg_give_the_known_adjusted_p_values_of_a_toy_family():
+    from hierloco.stats import benjamini_hochberg, holm
+
+    family = [0.01, 0.04, 0.03, 0.005]
+    # Holm: sorted 0.005, 0.01, 0.03, 0.04 times 4, 3, 2, 1 -> 0.02, 0.03, 0.06, 0.04 -> monotone 0.02, 0.03, 0.06, 0.06
+    assert holm(family) == pytest.approx([0.03, 0.06, 0.06, 0.02])
+    # BH: m p / rank = 0.02, 0.02, 0.04, 0.04, then the running minimum from the largest down
+    assert benjamini_hochberg(family) == pytest.approx([0.02, 0.04, 0.04, 0.02])
+    assert holm([0.5, 0.9]) == pytest.approx([1.0, 1.0]) and holm([]) == []
+    assert benjamini_hochberg([0.001, 0.8, 0.9]) == pytest.approx([0.003, 0.9, 0.9])
+
+
+def test_the_refuting_p_is_below_the_refuting_level_exactly_when_a_claim_is_refuted():
+    from hierloco.stats import ALPHA, DOES_NOT_HOLD, borderline, decide_better, decide_close
+
+    cases = [(decide_better, [0.50, 0.52, 0.51], [0.50, 0.51, 0.53]),
+             (decide_better, [0.9, 0.95, 0.92], [0.6, 0.62, 0.61]),
+             (decide_better, [0.40, 0.50, 0.45], [0.5, 0.55, 0.52]),
+             (decide_close, [0.16, 0.16, 0.17], [0.10, 0.11, 0.09]),
+             (decide_close, [0.10, 0.16, 0.12], [0.10, 0.11, 0.09]),
+             (decide_close, [0.01, 0.012, 0.011], [0.2, 0.21, 0.2])]
+    for decide, a, b in cases:
+        decision = decide(a, b)
+        assert (decision.verdict == DOES_NOT_HOLD) == (decision.p_refute < ALPHA), (decide.__name__, a, b, decision)
+    assert borderline(0.0498) and borderline(0.01) and not borderline(0.0099) and not borderline(0.05)

@@ -42,7 +42,7 @@ import math
 import torch
 from torch import nn
 
-from hierloco.components.com_model import MODELS, _check_last_dim, apply_delta, _as_float_tensor
+from hierloco.components.com_model import MODELS, CoMModel, _check_last_dim, apply_delta, _as_float_tensor
 from hierloco.envs.frames import wrap_angle, world_to_local
 from hierloco.envs.world_model import particle_moments
 
@@ -71,7 +71,7 @@ class EnsembleLinear(nn.Module):
 
 
 @MODELS.register("ensemble")
-class CoMEnsembleModel(nn.Module):
+class CoMEnsembleModel(CoMModel):
     """``M`` probabilistic members ``f_m(v_local, a)`` -> a Gaussian (or a point) over the local-frame delta.
 
     Args:
@@ -82,7 +82,7 @@ class CoMEnsembleModel(nn.Module):
         propagation: ``"ts"``, ``"mm"`` or ``"expectation"`` (see the module doc).
         member_data: ``"bootstrap"`` or ``"shuffle"``: what each member trains on.
         input_mean, input_std: ``2 + A`` statistics of ``(vx, vy, a)``. output_mean, output_std: ``5`` statistics of
-            the delta (the standardised units of the heads).
+            the delta (the standardised units of the heads); kept as buffers by :class:`CoMModel`.
 
     Shapes: ``forward`` and :meth:`predict` take ``... x 2`` / ``... x 5`` and ``... x A`` (broadcast) and return the
     mean over members, ``... x 5``; :meth:`members` and :meth:`predict_members` return ``... x M x 5``.
@@ -92,43 +92,29 @@ class CoMEnsembleModel(nn.Module):
                  propagation: str = "ts", member_data: str = "bootstrap", *, input_mean: torch.Tensor | None = None,
                  input_std: torch.Tensor | None = None, output_mean: torch.Tensor | None = None,
                  output_std: torch.Tensor | None = None):
-        super().__init__()
-        for name, value, minimum in [("action_dim", action_dim, 1), ("hidden", hidden, 1), ("members", members, 1)]:
-            if isinstance(value, bool) or int(value) != value or int(value) < minimum:
-                raise ValueError(f"{name} must be a whole number >= {minimum}, got {value!r}")
+        super().__init__(action_dim, hidden, input_mean=input_mean, input_std=input_std, output_mean=output_mean,
+                         output_std=output_std)
+        if isinstance(members, bool) or int(members) != members or int(members) < 1:
+            raise ValueError(f"members must be a whole number >= 1, got {members!r}")
         for name, value, valid in [("head", head, HEADS), ("propagation", propagation, PROPAGATIONS),
                                    ("member_data", member_data, MEMBER_DATA)]:
             if value not in valid:
                 raise ValueError(f"{name} must be one of {', '.join(valid)}, got {value!r}")
-        self.action_dim, self.hidden, self.num_members = int(action_dim), int(hidden), int(members)
+        self.num_members = int(members)
         self.head, self.propagation, self.member_data = head, propagation, member_data
-        num_inputs = 2 + self.action_dim
         outputs = 10 if head == "gaussian" else 5
-        self.layers = nn.ModuleList([EnsembleLinear(self.num_members, num_inputs, self.hidden),
+        self.layers = nn.ModuleList([EnsembleLinear(self.num_members, self.num_inputs, self.hidden),
                                      EnsembleLinear(self.num_members, self.hidden, self.hidden),
                                      EnsembleLinear(self.num_members, self.hidden, outputs)])
         if head == "gaussian":
             low, high = LOG_VARIANCE_BOUNDS
             self.min_log_variance = nn.Parameter(torch.full((5,), low, device="cpu"))
             self.max_log_variance = nn.Parameter(torch.full((5,), high, device="cpu"))
-        for name, value, size, default in [("input_mean", input_mean, num_inputs, 0.0),
-                                           ("input_std", input_std, num_inputs, 1.0),
-                                           ("output_mean", output_mean, 5, 0.0),
-                                           ("output_std", output_std, 5, 1.0)]:
-            buffer = (torch.full((size,), default, device="cpu") if value is None
-                      else torch.as_tensor(value, device="cpu").float().clone())
-            if buffer.shape != (size,):
-                raise ValueError(f"{name} must have shape ({size},), got {tuple(buffer.shape)}")
-            self.register_buffer(name, buffer)
 
     @property
     def num_particles(self) -> int:
         """P, the particles a world model carries over the horizon: one per member."""
         return self.num_members
-
-    def config(self) -> dict:
-        return {"action_dim": self.action_dim, "hidden": self.hidden, "members": self.num_members,
-                "head": self.head, "propagation": self.propagation, "member_data": self.member_data}
 
     # ------------------------------------------------------------------------------------------ the members
     def standardised_heads(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
@@ -144,15 +130,10 @@ class CoMEnsembleModel(nn.Module):
         log_variance = self.min_log_variance + nn.functional.softplus(log_variance - self.min_log_variance)
         return mean, log_variance
 
-    def _standardised_inputs(self, velocity_local, action) -> torch.Tensor:
-        dtype, device = self.input_mean.dtype, self.input_mean.device
-        velocity = torch.as_tensor(velocity_local, dtype=dtype, device=device)
-        action = torch.as_tensor(action, dtype=dtype, device=device)
-        _check_last_dim("velocity_local", velocity, 2)
-        _check_last_dim("action", action, self.action_dim)
-        batch = torch.broadcast_shapes(velocity.shape[:-1], action.shape[:-1])
-        raw = torch.cat([velocity.expand(*batch, 2), action.expand(*batch, self.action_dim)], -1)
-        return (raw - self.input_mean) / self.input_std
+    def standardised_delta(self, x: torch.Tensor) -> torch.Tensor:
+        """``... x (2 + A)`` standardised inputs -> the members' mean standardised delta ``... x 5``."""
+        flat = x.reshape(1, -1, x.shape[-1]).expand(self.num_members, -1, -1)
+        return self.standardised_heads(flat)[0].mean(0).reshape(*x.shape[:-1], 5)
 
     def _per_member(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
         """``... x M x in`` (member ``m`` reads ``[..., m, :]``) -> physical mean and variance ``... x M x 5``."""
@@ -168,19 +149,12 @@ class CoMEnsembleModel(nn.Module):
     def members(self, velocity_local, action) -> tuple[torch.Tensor, torch.Tensor | None]:
         """Every member's prediction from the same inputs: the mean ``... x M x 5`` of the delta in physical units
         and its (aleatoric) variance ``... x M x 5`` (``None`` with a deterministic head)."""
-        x = self._standardised_inputs(velocity_local, action)
+        x = self.standardised_inputs(velocity_local, action)
         return self._per_member(x.unsqueeze(-2).expand(*x.shape[:-1], self.num_members, x.shape[-1]))
 
     def forward(self, velocity_local, action) -> torch.Tensor:
         """``... x 2`` local velocity (m/s), ``... x A`` action -> ``... x 5`` the members' mean delta."""
         return self.members(velocity_local, action)[0].mean(-2)
-
-    def predict(self, com_state, action) -> torch.Tensor:
-        """``... x 5`` world state, ``... x A`` action -> ``... x 5`` world state after one action (the mean)."""
-        state = _as_float_tensor(com_state)
-        _check_last_dim("com_state", state, 5)
-        velocity_local = world_to_local(state[..., 3:5], state[..., 2])
-        return apply_delta(state.to(self.input_mean.device), self(velocity_local, action))
 
     def predict_members(self, com_state, action) -> torch.Tensor:
         """``... x 5`` world state, ``... x A`` action -> ``... x M x 5``: each member's mean next world state."""
@@ -207,7 +181,7 @@ class CoMEnsembleModel(nn.Module):
             mean, _ = particle_moments(particles)
             return self.predict_members(mean, action.squeeze(-2))
         velocity_local = world_to_local(particles[..., 3:5], particles[..., 2])
-        x = self._standardised_inputs(velocity_local, action)
+        x = self.standardised_inputs(velocity_local, action)
         mean, variance = self._per_member(x)
         if variance is not None:
             noise = torch.randn(mean.shape, generator=generator, device=mean.device, dtype=mean.dtype)

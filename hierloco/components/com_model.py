@@ -18,12 +18,13 @@ predicting standardised outputs; the statistics are buffers, so the module maps 
 stops early on the held-out loss.
 
 Models are a registry, :data:`MODELS` (``dynamics_model``): the MLP above is ``mlp``, the probabilistic ensemble of
-:mod:`hierloco.components.com_ensemble` (PETS, Chua et al., NeurIPS 2018) is ``ensemble``. A model's options are its
-constructor's keyword arguments (``MODELS.options("ensemble")``); :func:`train_com_model` trains any of them by name
-(``model="ensemble", members=5``), checkpoints record the name and options, and :meth:`TrainedCoMModel.load`
-rebuilds the model from the registry. A new model is one registered class with ``predict(com_state, action)`` and
-the training hooks of :class:`CoMDynamicsModel` (``training_rows``, ``epoch_order``, ``training_loss``,
-``heldout_loss``). :func:`com_model_module` wraps any of them as a TensorDict module.
+:mod:`hierloco.components.com_ensemble` (PETS, Chua et al., NeurIPS 2018) is ``ensemble``. Every model derives from
+:class:`CoMModel`, which states the contract: a new model is one subclass writing ``standardised_delta(x)``,
+with ``predict(com_state, action)``, the normalisation buffers and the training hooks inherited. A model's options
+are its constructor's keyword arguments (``MODELS.options("ensemble")``); :func:`train_com_model` trains any model by
+name (``model="ensemble", members=5``); the options a model is built with are recorded as it is built
+(:attr:`CoMModel.options`), its checkpoint holds its name and options, and :meth:`TrainedCoMModel.load` rebuilds
+it with them. :func:`com_model_module` wraps any of them as a TensorDict module.
 
 Example:
     >>> import torch
@@ -35,6 +36,9 @@ Example:
 
 from __future__ import annotations
 
+import functools
+import inspect
+import json
 import math
 import os
 import time
@@ -48,7 +52,7 @@ from tqdm.auto import tqdm
 
 from hierloco.envs.frames import local_to_world, world_to_local, wrap_angle
 from hierloco.io import ArtifactError, load_checkpoint, save_checkpoint
-from hierloco.registry import Registry
+from hierloco.registry import Registry, is_import_path
 
 CHECKPOINT_FORMAT = 1
 CHECKPOINT_KIND = "com_model"
@@ -130,39 +134,101 @@ def _nonzero_std(std: torch.Tensor) -> torch.Tensor:
     return torch.where(std > 1e-6, std, torch.ones_like(std))
 
 
-@MODELS.register("mlp")
-class CoMDynamicsModel(nn.Module):
-    """``f(v_local, a)``: velocity ``... x 2`` (m/s) and action ``... x A`` -> delta ``... x 5`` (see the module doc).
+# What a dynamics config section and train_com_model use themselves: a model's option may not be named like one
+# (``hidden`` is both: the width every model takes). tests/components/test_custom_model.py checks that this list
+# agrees with train_com_model's arguments and the pipeline's dynamics keys.
+RESERVED_OPTIONS = ("com_state", "action", "next_com_state", "model", "lr", "batch_size", "holdout", "max_epochs",
+                    "patience", "duration", "seed", "device", "progress", "num_transitions", "num_robots",
+                    "episode_length")
 
-    Args:
-        action_dim: A, the size of the action vector.
-        hidden: width of the 2 hidden ReLU layers.
-        input_mean, input_std: ``2 + A`` statistics of ``(vx, vy, a)`` used to standardise the input.
-        output_mean, output_std: ``5`` statistics of the delta used to de-standardise the output.
 
-    Leading dimensions of the velocity and the action broadcast against each other.
+def _recorded_options(signature: inspect.Signature, args: tuple, kwargs: dict) -> dict:
+    """The options a constructor with ``signature`` was called with: every named argument (defaults filled in) and
+    every extra keyword argument, but the registry's context (``action_dim``, the statistics)."""
+    bound = signature.bind(*args, **kwargs)
+    bound.apply_defaults()
+    options = {}
+    for index, (name, value) in enumerate(bound.arguments.items()):
+        kind = signature.parameters[name].kind
+        if index == 0 or kind == inspect.Parameter.VAR_POSITIONAL:  # self; positional extras have no names
+            continue
+        extra = value if kind == inspect.Parameter.VAR_KEYWORD else {name: value}
+        options.update({key: item for key, item in extra.items() if key not in MODELS.context})
+    return options
 
-    Example:
-        >>> import torch
-        >>> model = CoMDynamicsModel(action_dim=2, hidden=32)
-        >>> model(torch.zeros(10, 2), torch.zeros(10, 2)).shape
-        torch.Size([10, 5])
+
+class CoMModel(nn.Module):
+    """The contract of a CoM dynamics model: ``f(v_local, a)``, velocity ``... x 2`` (m/s) and action ``... x A`` ->
+    local-frame delta ``... x 5`` (see the module doc), learned on standardised inputs and outputs.
+
+    A model is one subclass that writes :meth:`standardised_delta` (``b x (2 + A)`` standardised inputs ->
+    ``b x 5`` standardised delta); the rest has defaults: :meth:`forward` (physical units), :meth:`predict` (world
+    frame), and the training hooks :func:`train_com_model` calls (:meth:`training_rows`, :meth:`epoch_order`,
+    :meth:`training_loss`: the MSE, :meth:`heldout_loss`, :meth:`heldout_report`), which a model may override (the
+    ensemble does).
+
+    Its constructor is called ``Model(action_dim, hidden=..., **options, **statistics)``:
+
+    - ``action_dim`` (A) and ``hidden`` (a width, ``dynamics.hidden``) come from the pipeline; pass both on to
+      ``super().__init__``;
+    - its *options* are its other keyword arguments with defaults (``+dynamics.<option>=...`` in a recipe, checked
+      against them before any work); their values are recorded as the model is built (:attr:`options`), saved in
+      its checkpoint and given back to the constructor when the checkpoint is loaded (by ``load_run``, ``evaluate``,
+      the exporter), so a model never writes a method to keep them. An option may not be named like a training
+      setting (:data:`RESERVED_OPTIONS`: ``lr``, ``seed``, ...): such a class is refused when it is defined;
+    - ``**statistics``, the keyword-only ``input_mean``, ``input_std`` (``2 + A``, of ``(vx, vy, a)``) and
+      ``output_mean``, ``output_std`` (``5``, of the delta), go on to ``super().__init__``, which keeps them as
+      buffers (``None``: zeros and ones).
+
+    Example (a residual network; ``docs/extending.md``, example 5, trains one in a recipe):
+        >>> class ResMLP(CoMModel):
+        ...     def __init__(self, action_dim, hidden=64, *, skip_scale: float = 1.0, **statistics):
+        ...         super().__init__(action_dim, hidden, **statistics)
+        ...         self.skip_scale = skip_scale
+        ...         self.inner = nn.Sequential(nn.Linear(self.num_inputs, hidden), nn.ReLU(), nn.Linear(hidden, 5))
+        ...         self.skip = nn.Linear(self.num_inputs, 5)
+        ...
+        ...     def standardised_delta(self, x):
+        ...         return self.inner(x) + self.skip_scale * self.skip(x)
+        >>> model = ResMLP(action_dim=3, skip_scale=0.5)
+        >>> model.options
+        {'hidden': 64, 'skip_scale': 0.5}
+        >>> model.predict(torch.zeros(4, 5), torch.rand(4, 3)).shape
+        torch.Size([4, 5])
     """
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        init = cls.__dict__.get("__init__")
+        if init is None:  # the base's constructor, already recording
+            return
+        signature = inspect.signature(init)
+        reserved = [name for name in list(signature.parameters)[1:] if name in RESERVED_OPTIONS]
+        if reserved:
+            raise TypeError(f"{cls.__qualname__}: option{'s' if len(reserved) > 1 else ''} {', '.join(reserved)} "
+                            f"named like train_com_model's own settings ({', '.join(RESERVED_OPTIONS)}): "
+                            "rename it")
+
+        @functools.wraps(init)
+        def init_recording_options(self, *args, **kwargs):
+            init(self, *args, **kwargs)
+            if type(self).__init__ is init_recording_options:  # the class built, not a base it calls
+                self._options = _recorded_options(signature, (self, *args), kwargs)
+
+        cls.__init__ = init_recording_options
 
     def __init__(self, action_dim: int, hidden: int = 512, *, input_mean: torch.Tensor | None = None,
                  input_std: torch.Tensor | None = None, output_mean: torch.Tensor | None = None,
                  output_std: torch.Tensor | None = None):
         super().__init__()
-        if int(action_dim) < 1:
-            raise ValueError(f"action_dim must be at least 1, got {action_dim}")
-        if int(hidden) < 1:
-            raise ValueError(f"hidden must be at least 1, got {hidden}")
+        for name, value in [("action_dim", action_dim), ("hidden", hidden)]:
+            if isinstance(value, bool) or int(value) != value or int(value) < 1:
+                raise ValueError(f"{name} must be a whole number >= 1, got {value!r}")
         self.action_dim, self.hidden = int(action_dim), int(hidden)
-        num_inputs = 2 + self.action_dim
-        self.net = MLP(in_features=num_inputs, out_features=5, num_cells=[self.hidden, self.hidden],
-                       activation_class=nn.ReLU)
-        for name, value, size, default in [("input_mean", input_mean, num_inputs, 0.0),
-                                           ("input_std", input_std, num_inputs, 1.0),
+        self.num_inputs = 2 + self.action_dim
+        self._options = {"hidden": self.hidden}
+        for name, value, size, default in [("input_mean", input_mean, self.num_inputs, 0.0),
+                                           ("input_std", input_std, self.num_inputs, 1.0),
                                            ("output_mean", output_mean, 5, 0.0),
                                            ("output_std", output_std, 5, 1.0)]:
             buffer = (torch.full((size,), default, device="cpu") if value is None
@@ -171,6 +237,22 @@ class CoMDynamicsModel(nn.Module):
                 raise ValueError(f"{name} must have shape ({size},), got {tuple(buffer.shape)}")
             self.register_buffer(name, buffer)
 
+    @property
+    def options(self) -> dict:
+        """The options the model was built with (its constructor's arguments but ``action_dim`` and the
+        statistics): what its checkpoint records and gives back to the constructor."""
+        return dict(self._options)
+
+    def config(self) -> dict:
+        """The constructor's arguments a checkpoint records: ``action_dim`` and :attr:`options`."""
+        return {"action_dim": self.action_dim, **self.options}
+
+    # ------------------------------------------------------------------------------------------ what a model writes
+    def standardised_delta(self, x: torch.Tensor) -> torch.Tensor:
+        """``... x (2 + A)`` standardised ``(vx, vy, a)`` -> ``... x 5`` standardised delta: the network."""
+        raise NotImplementedError(f"{type(self).__name__} must write standardised_delta(x) (CoMModel)")
+
+    # ------------------------------------------------------------------------------------------ predictions
     def _inputs(self, velocity_local, action) -> torch.Tensor:
         """``... x (2 + A)`` raw inputs, leading dimensions broadcast, in the model's dtype and device."""
         dtype, device = self.input_mean.dtype, self.input_mean.device
@@ -181,10 +263,13 @@ class CoMDynamicsModel(nn.Module):
         batch = torch.broadcast_shapes(velocity.shape[:-1], action.shape[:-1])
         return torch.cat([velocity.expand(*batch, 2), action.expand(*batch, self.action_dim)], -1)
 
+    def standardised_inputs(self, velocity_local, action) -> torch.Tensor:
+        """``... x 2`` local velocity (m/s), ``... x A`` action -> the standardised ``... x (2 + A)`` inputs."""
+        return (self._inputs(velocity_local, action) - self.input_mean) / self.input_std
+
     def normalized(self, velocity_local, action) -> torch.Tensor:
         """The standardised delta ``... x 5`` (what the training loss is computed on)."""
-        inputs = (self._inputs(velocity_local, action) - self.input_mean) / self.input_std
-        return self.net(inputs)
+        return self.standardised_delta(self.standardised_inputs(velocity_local, action))
 
     def forward(self, velocity_local, action) -> torch.Tensor:
         """``... x 2`` local velocity (m/s), ``... x A`` action -> ``... x 5`` delta in physical units."""
@@ -197,12 +282,9 @@ class CoMDynamicsModel(nn.Module):
         velocity_local = world_to_local(state[..., 3:5], state[..., 2])
         return apply_delta(state.to(self.input_mean.device), self(velocity_local, action))
 
-    def config(self) -> dict:
-        return {"action_dim": self.action_dim, "hidden": self.hidden}
-
     # ---------------------------------------------------------------- training hooks (see train_com_model)
-    def training_rows(self, num_train: int, generator: torch.Generator) -> None:
-        """The rows each part of the model learns from: all of them (nothing drawn)."""
+    def training_rows(self, num_train: int, generator: torch.Generator) -> torch.Tensor | None:
+        """The rows each part of the model learns from: all of them (``None``, nothing drawn)."""
         return None
 
     def epoch_order(self, rows, num_train: int, generator: torch.Generator) -> torch.Tensor:
@@ -211,16 +293,45 @@ class CoMDynamicsModel(nn.Module):
 
     def training_loss(self, x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
         """The MSE of the standardised delta on ``b x (2 + A)`` standardised inputs and ``b x 5`` targets."""
-        return ((self.net(x) - y) ** 2).mean()
+        return ((self.standardised_delta(x) - y) ** 2).mean()
 
     @torch.no_grad()
     def heldout_loss(self, x: torch.Tensor, y: torch.Tensor) -> float:
         """The standardised MSE on held-out rows (what early stopping watches)."""
-        return float(((self.net(x) - y) ** 2).mean())
+        return float(((self.standardised_delta(x) - y) ** 2).mean())
 
     def heldout_report(self, x: torch.Tensor, y: torch.Tensor) -> dict:
-        """Nothing beyond the RMSE for a point model."""
+        """Entries of the training report beyond the RMSE: none for a point model."""
         return {}
+
+
+@MODELS.register("mlp")
+class CoMDynamicsModel(CoMModel):
+    """The paper's model: a :class:`torchrl.modules.MLP` with 2 hidden layers of ``hidden`` ReLU units
+    (:class:`CoMModel`: ``f(v_local, a)``, velocity ``... x 2`` (m/s) and action ``... x A`` -> delta ``... x 5``).
+
+    Args:
+        action_dim: A, the size of the action vector.
+        hidden: width of the 2 hidden ReLU layers.
+        statistics: ``input_mean``, ``input_std`` (``2 + A``, of ``(vx, vy, a)``), ``output_mean``, ``output_std``
+            (``5``, of the delta): see :class:`CoMModel`.
+
+    Leading dimensions of the velocity and the action broadcast against each other.
+
+    Example:
+        >>> import torch
+        >>> model = CoMDynamicsModel(action_dim=2, hidden=32)
+        >>> model(torch.zeros(10, 2), torch.zeros(10, 2)).shape
+        torch.Size([10, 5])
+    """
+
+    def __init__(self, action_dim: int, hidden: int = 512, **statistics):
+        super().__init__(action_dim, hidden, **statistics)
+        self.net = MLP(in_features=self.num_inputs, out_features=5, num_cells=[self.hidden, self.hidden],
+                       activation_class=nn.ReLU)
+
+    def standardised_delta(self, x: torch.Tensor) -> torch.Tensor:
+        return self.net(x)
 
 
 def model_name(model: nn.Module) -> str:
@@ -288,18 +399,35 @@ class TrainedCoMModel:
         return model_name(self.model)
 
     def save(self, path: str | os.PathLike) -> None:
-        """Writes a checkpoint (the model's registry name, its config, weights and statistics, metadata) to ``path``
-        atomically."""
-        save_checkpoint(path, CHECKPOINT_KIND, CHECKPOINT_FORMAT, {"model": self.name, "config": self.model.config(),
+        """Writes a checkpoint (the model's registry name, its constructor's arguments :meth:`CoMModel.config`,
+        weights and statistics, metadata) to ``path`` atomically; an option that JSON cannot hold (an object) is a
+        ``ValueError`` before anything is written."""
+        config = self.model.config()
+        try:
+            json.dumps(config)
+        except (TypeError, ValueError) as error:
+            raise ValueError(f"{type(self.model).__name__}: its options must be numbers, strings, booleans, lists or "
+                             f"dicts of them to be saved, got {config!r} ({error})") from None
+        save_checkpoint(path, CHECKPOINT_KIND, CHECKPOINT_FORMAT, {"model": self.name, "config": config,
                         "state_dict": self.model.state_dict(), "metadata": self.metadata})
 
     @classmethod
-    def load(cls, path: str | os.PathLike, map_location="cpu") -> "TrainedCoMModel":
+    def load(cls, path: str | os.PathLike, map_location="cpu", *, trust_imports=()) -> "TrainedCoMModel":
         """Reads a checkpoint written by :meth:`save` (a checkpoint without a model name is an ``mlp``), building the
-        model from :data:`MODELS`; raises :class:`ArtifactError` naming the file if it is bad."""
+        model from :data:`MODELS` with the options it was trained with; raises :class:`ArtifactError` naming the file
+        if it is bad. A checkpoint is data: a model it names by import path (``pkg.module:Class``) is imported only
+        when ``trust_imports`` lists that path (or it is imported already: the config named it)."""
         payload = load_checkpoint(path, CHECKPOINT_KIND, CHECKPOINT_FORMAT, map_location)
+        name = payload.get("model", "mlp")
+        if is_import_path(name) and name not in MODELS:
+            if name not in ({trust_imports} if isinstance(trust_imports, str) else set(trust_imports)):
+                raise ArtifactError(f"{path}: its model {name!r} is an import path read from the file, which is never "
+                                    f"run as code; if you trust it, name it yourself: trust_imports=[{name!r}]")
+            try:
+                MODELS.import_path(name, base=CoMModel)
+            except ValueError as error:
+                raise ArtifactError(f"{path}: {error}") from None
         try:
-            name = payload.get("model", "mlp")
             if name not in MODELS:
                 raise ValueError(f"unknown dynamics model {name!r} ({', '.join(MODELS.names())})")
             model = MODELS[name](**payload["config"])
@@ -376,9 +504,10 @@ def train_com_model(
             torch.
         action: ``M x A`` actions held over each transition.
         model: the model's registry name: ``mlp`` (:class:`CoMDynamicsModel`, the paper's; trained exactly as
-            before the registry existed) or ``ensemble``
-            (:class:`~hierloco.components.com_ensemble.CoMEnsembleModel`); ``model_options`` are its other options
-            (``members``, ``head``, ``propagation``, ``member_data`` for the ensemble).
+            before the registry existed), ``ensemble``
+            (:class:`~hierloco.components.com_ensemble.CoMEnsembleModel`) or any registered :class:`CoMModel`;
+            ``model_options`` are its other options (``members``, ``head``, ``propagation``, ``member_data`` for the
+            ensemble).
         hidden: width of the 2 hidden layers. lr, batch_size: Adam step size and minibatch size (per member for an
             ensemble).
         holdout: fraction of the transitions held out (seeded random split, see :func:`holdout_split`).
@@ -410,6 +539,8 @@ def train_com_model(
     state, act, next_state = _check_training_inputs(com_state, action, next_com_state, holdout)
     if model not in MODELS:
         raise ValueError(f"unknown dynamics model {model!r} (dynamics models: {', '.join(MODELS.names())})")
+    if not (isinstance(MODELS[model], type) and issubclass(MODELS[model], CoMModel)):
+        raise ValueError(f"dynamics model {model!r} is not a CoMModel subclass (hierloco.components.com_model)")
     problems = MODELS.check_options(model, {"hidden": hidden, **model_options})
     if problems:
         raise ValueError("; ".join(problems))
@@ -495,13 +626,13 @@ def train_com_model(
         "action_dim": int(act.shape[1]), "hidden": int(hidden), "lr": float(lr), "batch_size": int(batch_size),
         "holdout": float(holdout), "max_epochs": int(max_epochs), "patience": int(patience),
         "duration": float(duration), "model": name,
-        "model_options": {k: v for k, v in model.config().items() if k != "action_dim"},
+        "model_options": model.options,
         **model.heldout_report(heldout_x.cpu(), heldout_y.cpu()),
     }
     return TrainedCoMModel(model, metadata)
 
 
-def prediction_errors(model: CoMDynamicsModel, com_states, actions) -> torch.Tensor:
+def prediction_errors(model: CoMModel, com_states, actions) -> torch.Tensor:
     """How wrong ``model`` was about the actions that were taken: predicted minus actual delta, ``E x T x 5``.
 
     Args:
@@ -535,6 +666,7 @@ def prediction_errors(model: CoMDynamicsModel, com_states, actions) -> torch.Ten
     return error
 
 
-__all__ = ["MODELS", "CoMDynamicsModel", "TrainedCoMModel", "apply_delta", "com_model_module", "holdout_split",
-           "local_transition", "model_name", "prediction_errors", "train_com_model"]
+__all__ = ["MODELS", "RESERVED_OPTIONS", "CoMDynamicsModel", "CoMModel", "TrainedCoMModel", "apply_delta",
+           "com_model_module", "holdout_split", "local_transition", "model_name", "prediction_errors",
+           "train_com_model"]
 

@@ -58,6 +58,9 @@ class TaskRollout:
         plan_seconds: mean wall-clock of one policy (planner) call, s.
         metrics: the task's per-episode extra metrics (:meth:`Task.extra_metrics`, each ``E``) over the 100 Hz CoM
             paths, e.g. ``path_distance`` (m) for trajectory tracking; empty when the env does not record.
+        fell_step: ``E`` int, the task step during which each robot first fell (``-1``: it did not).
+        pushes: the pushes its robots took (:class:`hierloco.envs.terrain.PushEvent`, ``copy`` = the robot), when
+            the env pushes (``docs/terrain.md``).
     """
 
     result: TaskResult
@@ -68,6 +71,8 @@ class TaskRollout:
     fell: np.ndarray
     plan_seconds: float
     metrics: dict[str, np.ndarray] = field(default_factory=dict)
+    fell_step: np.ndarray | None = None
+    pushes: list = field(default_factory=list)
 
 
 class _TimedPolicy:
@@ -122,9 +127,118 @@ def run_task(env: LatentActionEnv, policy, task: Task, *, episodes=None, transfo
         contacts = rollout["next", "foot_contacts"].flatten(1, 2).numpy()
         qpos = rollout["next", "qpos"].flatten(1, 2).numpy()
         metrics = task.extra_metrics(paths, episodes.numpy())
-    fell = rollout["next", "fallen"].squeeze(-1).any(1).numpy()
+    fallen = rollout["next", "fallen"].squeeze(-1).numpy()  # E x T, true from the step a robot fell
+    fell = fallen.any(1)
     actions = rollout["action"].reshape(count, task.num_steps, -1).float().numpy()
-    return TaskRollout(result, actions, paths, contacts, qpos, fell, timed.seconds / task.num_steps, metrics)
+    return TaskRollout(result, actions, paths, contacts, qpos, fell, timed.seconds / task.num_steps, metrics,
+                       fell_step=np.where(fell, fallen.argmax(1), -1),
+                       pushes=list(getattr(getattr(env, "sim", None), "push_log", ())))
+
+
+RECOVERY_WINDOW_S = 0.5  # the CoM velocity is averaged over this long (about two gait periods) to judge recovery
+RECOVERY_TOLERANCE_MPS = 0.05  # recovered: back within this of the velocity error the robot had before the push
+
+
+def world_metrics(rollout: TaskRollout, task: Task, *, steps_per_action: int, pushes: bool = False,
+                  window_s: float = RECOVERY_WINDOW_S, tolerance_mps: float = RECOVERY_TOLERANCE_MPS
+                  ) -> tuple[dict[str, np.ndarray], dict[str, float]]:
+    """Falls and push recovery of an evaluation off the lab floor (``docs/terrain.md``): per episode (each ``E``)
+    and as a summary.
+
+    Per episode: ``fell`` (1 when the robot fell). With ``pushes``: ``pushes`` (the pushes it took standing: one on
+    a fallen robot is not counted), ``push_falls`` (pushes it did not survive: it fell before the next push, or
+    before the episode's end, to the resolution of one action), ``pushes_recovered`` and ``recovery_s`` (the mean
+    time, over the pushes it recovered from, until it moved as commanded again; NaN when none). Recovery: the CoM
+    velocity averaged over ``window_s`` from a time on is back within ``tolerance_mps`` of the error it had over the
+    ``window_s`` before the push, against the task's commanded velocity (a velocity-tracking task's target, world
+    frame) or, for other tasks, against the velocity it had before the push; before the next push.
+
+    Summary: ``fall_rate``; with pushes ``pushes``, ``push_fall_rate`` (pushes not survived / pushes, NaN without
+    pushes), ``recovered_fraction`` (of the pushes survived) and ``recovery_s`` (mean over the recovered).
+
+    Example:
+        >>> import numpy as np
+        >>> from hierloco.envs.tasks import VelocityTracking
+        >>> from hierloco.envs.terrain import PushEvent
+        >>> task = VelocityTracking(velocities=[[0.0, 0.2]], steps_per_target=4, rounds=1)
+        >>> paths = np.zeros((1, 400, 5)); paths[0, :, 4] = 0.2   # tracking 0.2 m/s forward ...
+        >>> paths[0, 150:180, 3] = 0.5                            # ... knocked sideways for 0.3 s at 1.5 s
+        >>> rollout = TaskRollout(None, None, paths, None, None, np.zeros(1, bool), 0.0,
+        ...                       fell_step=np.array([-1]), pushes=[PushEvent(0, 150, 50, 1.5, (0.5, 0.0), 0.0)])
+        >>> per_episode, summary = world_metrics(rollout, task, steps_per_action=100, pushes=True)
+        >>> summary["push_fall_rate"], summary["recovery_s"]
+        (0.0, 0.25)
+    """
+    fell = np.asarray(rollout.fell, dtype=bool)
+    count = len(fell)
+    per_episode = {"fell": fell.astype(np.float64)}
+    summary = {"fall_rate": float(fell.mean())}
+    if not pushes:
+        return per_episode, summary
+    fell_step = (np.asarray(rollout.fell_step) if rollout.fell_step is not None
+                 else np.where(fell, task.num_steps - 1, -1))
+    n, steps = int(steps_per_action), task.num_steps
+    window = max(1, int(round(window_s / CONTROL_TIMESTEP)))
+    paths = rollout.com_paths
+    commands = None
+    if paths is not None and getattr(task, "target_is_velocity", False):
+        episodes = torch.arange(count, device="cpu")[:, None] % task.num_episodes
+        targets = task.target(episodes.expand(count, steps), torch.arange(steps, device="cpu")[None].expand(count,
+                                                                                                           steps))
+        commands = np.repeat(np.asarray(targets, dtype=np.float64), n, axis=1)  # E x (T * N) x 2, world frame
+    taken, not_survived, recovered = np.zeros(count), np.zeros(count), np.zeros(count)
+    recovery = [[] for _ in range(count)]
+    for e in range(count):
+        events = sorted((p.episode_step for p in rollout.pushes if p.copy == e and p.episode_step < steps * n))
+        for k, step in enumerate(events):
+            action = step // n
+            if 0 <= fell_step[e] < action:
+                continue  # already down
+            taken[e] += 1
+            following = events[k + 1] if k + 1 < len(events) else steps * n
+            last = max(action, following // n - 1) if k + 1 < len(events) else steps - 1
+            if action <= fell_step[e] <= last:
+                not_survived[e] += 1
+                continue
+            if paths is None:
+                continue
+            seconds = _recovery_seconds(paths[e, :, 3:5].astype(np.float64), None if commands is None
+                                        else commands[e], step, following, window, tolerance_mps)
+            if np.isfinite(seconds):
+                recovered[e] += 1
+                recovery[e].append(seconds)
+    times = [t for episode in recovery for t in episode]
+    per_episode.update({"pushes": taken, "push_falls": not_survived, "pushes_recovered": recovered,
+                        "recovery_s": np.array([np.mean(t) if t else np.nan for t in recovery])})
+    survived = taken.sum() - not_survived.sum()
+    summary.update({"pushes": float(taken.sum()),
+                    "push_fall_rate": float(not_survived.sum() / taken.sum()) if taken.sum() else float("nan"),
+                    "recovered_fraction": float(recovered.sum() / survived) if survived else float("nan"),
+                    "recovery_s": float(np.mean(times)) if times else float("nan")})
+    return per_episode, summary
+
+
+def _recovery_seconds(velocity: np.ndarray, command: np.ndarray | None, push: int, until: int, window: int,
+                      tolerance: float) -> float:
+    """Seconds from the push at control step ``push`` until the CoM ``velocity`` (``S x 2``) averaged over
+    ``window`` steps is back within ``tolerance`` of its error before the push (against ``command``, ``S x 2``, or
+    its own velocity before the push), with the window ending by ``until``; NaN when it is not."""
+    start = max(0, push - window)
+    if push <= start:
+        return float("nan")
+    cumulative = np.concatenate([np.zeros((1, 2)), np.cumsum(velocity, 0)])
+    before = (cumulative[push] - cumulative[start]) / (push - start)
+    error_before = 0.0
+    if command is not None:
+        commanded = np.concatenate([np.zeros((1, 2)), np.cumsum(command, 0)])
+        error_before = float(np.linalg.norm(before - (commanded[push] - commanded[start]) / (push - start)))
+    last = min(until, len(velocity)) - window
+    for t in range(push, last + 1):
+        mean = (cumulative[t + window] - cumulative[t]) / window
+        reference = before if command is None else (commanded[t + window] - commanded[t]) / window
+        if np.linalg.norm(mean - reference) <= error_before + tolerance:
+            return (t - push) * CONTROL_TIMESTEP
+    return float("nan")
 
 
 def latent_grid(action_low, action_high, grid: int) -> tuple[np.ndarray, np.ndarray]:

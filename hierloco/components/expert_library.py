@@ -13,9 +13,9 @@ must span, and :func:`require_expert_library_quality` stops a run with an :class
 cannot (say a robot that walks backward whatever it is commanded): how far off, in which direction, what to try.
 
 Example:
-    >>> lib = build_expert_library("daisy", num_experts=4, seed=0, progress=False)
+    >>> lib = build_expert_library("daisy", 3, progress=False)
     >>> lib.joint_targets.shape  # G x N x J
-    (4, 100, 18)
+    (3, 100, 18)
 """
 
 from __future__ import annotations

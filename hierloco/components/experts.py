@@ -16,7 +16,9 @@ targets, closed loop on the measured CoM velocity, batched over B robots that sh
 
 Two footstep laws (``footstep_law=``): ``"integral"`` (default) follows the command corrected by an outer loop that
 integrates the velocity and yaw-rate errors (it removes the steady-state error of the proportional law), and
-``"plain"`` is the law above alone, the paper's, with ``v_des`` the command itself.
+``"plain"`` is the law above alone, with ``v_des`` the command itself. The paper names only "an expert-designed
+feedback law" that converts desired CoM velocities to footsteps (Li et al., RA-L 2021, Sec. IV-A and IV-C, after
+Truong et al. 2020); it does not say whether that law has an integral loop.
 
 The feedback can be applied every control step (``feedback_steps=1`` in :func:`run_closed_loop`, how the experts
 are recorded) or every k steps: the controller then plans k steps of footholds from the state measured so far, turns

@@ -100,6 +100,9 @@ def train_sac_low_level(
     device="cpu",
     progress: bool = False,
     logger=None,
+    terrain=None,
+    pushes=None,
+    randomization=None,
 ) -> TrainedSACLowLevel:
     """Trains a SAC policy to track velocity commands on ``num_robots`` robots at once (:func:`train_sac` on
     :class:`VelocityCommandEnv`).
@@ -125,6 +128,8 @@ def train_sac_low_level(
         compile_update: compile the SAC update (:meth:`SACAgent.build`).
         torch_threads_during: torch threads while training (:func:`torch_threads`).
         nthread: simulation threads. seed: networks, commands, reset noise and exploration.
+        terrain, pushes, randomization: the world it learns in (:class:`VelocityCommandEnv`, ``docs/terrain.md``;
+            default flat, no pushes, nominal dynamics); those not at their default are in ``settings``.
         device: where the agent, its updates and the replay buffer live (the simulation runs on the CPU).
         progress: show a progress bar (off by default; the recipes turn it on). logger: anything with
             ``log_metrics(dict, step=)`` (:class:`hierloco.loggers.RunLogger`); metrics are ``train/sac_low_level/...``.
@@ -143,9 +148,14 @@ def train_sac_low_level(
                 "action_scale": float(action_scale), "command_interval": float(command_interval),
                 "episode_length": float(episode_length), "reward_weights": dict(reward_weights or {}),
                 "init_joint_noise": float(init_joint_noise), "seed": int(seed)}
+    from hierloco.envs.terrain import make_pushes, make_randomization, make_terrain
+
+    world = {"terrain": make_terrain(terrain), "pushes": make_pushes(pushes),
+             "randomization": make_randomization(randomization)}
+    settings.update({name: part.key() for name, part in world.items() if part.key()})
     env = VelocityCommandEnv(robot, num_robots, action_scale=action_scale, command_interval=command_interval,
                              episode_length=episode_length, reward_weights=reward_weights,
-                             init_joint_noise=init_joint_noise, seed=seed, nthread=nthread)
+                             init_joint_noise=init_joint_noise, seed=seed, nthread=nthread, **world)
     j = robot.num_joints
     agent = SACAgent.build(env.interface.observation_size, [-1.0] * j, [1.0] * j, hidden=hidden,
                            num_layers=num_layers, lr=lr, gamma=gamma, tau=tau, alpha_init=alpha_init,

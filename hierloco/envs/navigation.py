@@ -5,7 +5,11 @@ The path is planned with A* on an occupancy grid whose obstacles are inflated by
 shortened by line-of-sight shortcuts and resampled evenly. The task :class:`Navigation` (registered as
 ``navigation``) is trajectory tracking along that path in the arena: its boxes are in the robots' world during an
 evaluation (:attr:`hierloco.envs.tasks.Task.obstacles`), so a recipe evaluates it like any task
-(``+eval.tasks.navigation_arena1={task: navigation, arena_seed: 1, inflation: 0.65}``).
+(``+eval.tasks.navigation_arena1={task: navigation, arena_seed: 1, inflation: 0.65}``), on any terrain too
+(``terrain: {name: rough, difficulty: 0.3}`` beside its options, or ``eval.terrain``): the boxes then reach from the
+floor to their own height above the highest ground under them
+(:meth:`hierloco.envs.terrain.Terrain.place_obstacles`) and the path is planned on the arena's floor plan as on flat
+ground (``docs/terrain.md``).
 
 Example:
     >>> arena = cluttered_arena(seed=0)

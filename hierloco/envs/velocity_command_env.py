@@ -206,8 +206,12 @@ class VelocityCommandEnv(EnvBase):
         linear_sigma: width of the linear tracking kernel, m^2/s^2; yaw_sigma: of the yaw-rate kernel, rad^2/s^2.
         disabled_legs: legs locked at their standing angles.
         init_joint_noise: rad of uniform noise on the standing joint angles at reset.
-        seed: seeds the reset noise and the commands.
+        seed: seeds the reset noise and the commands (and the pushes and randomised dynamics).
         nthread: simulation threads.
+        terrain, pushes, randomization: the ground, pushes on the trunk and randomised dynamics (a name or mapping
+            of options each, or the built object), passed to the batched simulator
+            (:class:`hierloco.envs.batched_sim.BatchedSimulator`, ``docs/terrain.md``): the robots learn on that
+            ground, are pushed as they learn and meet new dynamics at every reset. Default: flat, none, nominal.
 
     Besides ``observation`` the env returns ``command`` (``B x 3``, the command now in force) and, for the step
     just taken, ``tracking_error`` (``B x 1``, ``||v_cmd - v||`` in m/s for the command the step was rewarded for)
@@ -219,7 +223,8 @@ class VelocityCommandEnv(EnvBase):
                  command_interval: float = 3.0, episode_length: float = 10.0, gait_period: float | None = None,
                  reward_weights: Mapping[str, float] | None = None, linear_sigma: float = 0.04,
                  yaw_sigma: float = 0.1, disabled_legs: Sequence[str] = (), init_joint_noise: float = 0.02,
-                 seed: int | None = None, nthread: int | None = None, device: str = "cpu"):
+                 seed: int | None = None, nthread: int | None = None, device: str = "cpu", terrain=None,
+                 pushes=None, randomization=None):
         robot = get_robot(robot)
         b = int(num_robots)
         if b < 1:
@@ -240,7 +245,8 @@ class VelocityCommandEnv(EnvBase):
         self.robot = robot
         self.interface = VelocityCommandInterface.for_robot(robot, action_scale=action_scale, gait_period=gait_period)
         self.sim = BatchedSimulator(robot, b, disabled_legs=disabled_legs, init_joint_noise=init_joint_noise,
-                                    seed=seed, nthread=nthread)
+                                    seed=seed, nthread=nthread, terrain=terrain, pushes=pushes,
+                                    randomization=randomization)
         self.command_low, self.command_high = low, high
         self.command_steps = max(1, int(round(command_interval / CONTROL_TIMESTEP)))
         self.episode_steps = max(1, int(round(episode_length / CONTROL_TIMESTEP)))

@@ -103,12 +103,13 @@ def make_task_from_spec(name: str, spec: dict):
     """The task ``name`` of the ``eval`` section: ``spec`` holds its type (``task``: a name in the task registry
     :data:`hierloco.envs.tasks.TASKS`, or ``package.module:Class``; default the name) and options; ``split: train``
     gives its training split instead (:meth:`hierloco.envs.tasks.Task.training_split`: the half of the targets a
-    baseline is trained or tuned on), named ``<name>_train``.
+    baseline is trained or tuned on), named ``<name>_train``. The world the task is evaluated in (its own
+    ``terrain``, ``pushes``, ``randomization``: :data:`WORLD_KEYS`) is not the task's: :func:`world` reads it.
 
     Unknown options and bad values raise :class:`ConfigError` naming the task, the option and the valid ones."""
     from hierloco.envs.tasks import make_task
 
-    options = dict(spec or {})
+    options = {key: value for key, value in (spec or {}).items() if key not in WORLD_KEYS}  # the world: world()
     kind = options.pop("task", name)
     split = options.pop("split", "all")
     if split not in ("all", "train"):
@@ -118,6 +119,117 @@ def make_task_from_spec(name: str, spec: dict):
     except (TypeError, ValueError) as error:
         raise ConfigError(f"bad config: eval task {name!r}: {error}") from None
     return task.training_split() if split == "train" else task
+
+
+# ---------------------------------------------------------------------------------------------------- the world
+# The ground, pushes on the trunk and randomised dynamics (docs/terrain.md). ``terrain`` and ``randomization`` (config
+# groups: recipes/conf/terrain, recipes/conf/randomization) are the world of the whole run: its dynamics data, its
+# SAC training and its evaluations. ``eval.terrain``, ``eval.pushes`` and ``eval.randomization`` set the evaluations'
+# world alone (what ``hierloco evaluate`` may change), and an evaluation task's own ``terrain``, ``pushes`` and
+# ``randomization`` (options beside its type) set its own. Flat ground, no pushes and nominal dynamics are keyed as
+# nothing: every stage key is then what it was before the world had options.
+WORLD_KEYS = ("terrain", "pushes", "randomization")
+WORLD_PARTS = ("data", "training", "evaluation")  # dynamics data, SAC training (high and low level), evaluations
+
+
+def _plain(value):
+    return OmegaConf.to_container(value, resolve=True) if isinstance(value, (DictConfig, ListConfig)) else value
+
+
+def world_spec(cfg, part: str, task: dict | None = None) -> dict:
+    """What the config gives for the world of ``part`` (one of :data:`WORLD_PARTS`; for ``evaluation``, of the task
+    whose spec is ``task``): ``{"terrain": ..., "pushes": ..., "randomization": ...}`` as typed (``None``: the
+    default). Pushes are an evaluation's only. A config without these sections (a run made before them) is flat,
+    without pushes, with nominal dynamics."""
+    if part not in WORLD_PARTS:
+        raise ValueError(f"part must be one of {WORLD_PARTS}, got {part!r}")
+    spec = {"terrain": _plain(get(cfg, "terrain")), "pushes": None,
+            "randomization": _plain(get(cfg, "randomization"))}
+    if part == "evaluation":
+        for key in WORLD_KEYS:
+            for source in (get(cfg, f"eval.{key}"), (task or {}).get(key)):
+                if source is not None:
+                    spec[key] = _plain(source)
+    return spec
+
+
+class World:
+    """The world a simulation runs in: a built :class:`~hierloco.envs.terrain.Terrain`,
+    :class:`~hierloco.envs.terrain.Pushes` and :class:`~hierloco.envs.terrain.DynamicsRandomization`
+    (:func:`make_world`). ``params()`` is what a stage key holds of it (``{}`` for the default world); ``options()``
+    the keyword arguments of the simulators (``BatchedSimulator``, ``LatentActionEnv``)."""
+
+    def __init__(self, terrain, pushes, randomization):
+        self.terrain, self.pushes, self.randomization = terrain, pushes, randomization
+
+    def params(self) -> dict:
+        keys = {"terrain": self.terrain.key(), "pushes": self.pushes.key(), "randomization": self.randomization.key()}
+        return {name: key for name, key in keys.items() if key}
+
+    def options(self) -> dict:
+        return {"terrain": self.terrain, "pushes": self.pushes, "randomization": self.randomization}
+
+    @property
+    def is_default(self) -> bool:
+        return not self.params()
+
+    def describe(self) -> str:
+        """One line: ``"rough (difficulty=0.5, seed=1); pushes 0.5 m/s; randomised dynamics"``."""
+        parts = [self.terrain.describe()]
+        if self.pushes.active:
+            parts.append(f"pushes {self.pushes.magnitude_mps:g} m/s every {self.pushes.interval_s[0]:g}-"
+                         f"{self.pushes.interval_s[1]:g} s")
+        if self.randomization.active:
+            parts.append("randomised dynamics (" + ", ".join(self.randomization.key()) + ")")
+        return "; ".join(parts)
+
+
+def make_world(spec: dict) -> World:
+    """The :class:`World` of a :func:`world_spec`; a bad option or terrain file raises
+    :class:`hierloco.envs.terrain.TerrainError` (one line)."""
+    from hierloco.envs.terrain import make_pushes, make_randomization, make_terrain
+
+    return World(make_terrain(spec.get("terrain")), make_pushes(spec.get("pushes")),
+                 make_randomization(spec.get("randomization")))
+
+
+def world(cfg, part: str, task_name: str | None = None) -> World:
+    """The :class:`World` of ``part`` in ``cfg`` (for ``evaluation``, of the evaluation task ``task_name``); a bad
+    one is a :class:`ConfigError` (checked before any work by :func:`check_world`)."""
+    from hierloco.envs.terrain import TerrainError
+
+    task = task_specs(cfg).get(task_name) if task_name is not None else None
+    try:
+        return make_world(world_spec(cfg, part, task))
+    except TerrainError as error:
+        raise ConfigError(f"bad config: {error}") from None
+
+
+def check_world(c: Checker) -> None:
+    """``terrain``, ``randomization``, ``eval.terrain``, ``eval.pushes``, ``eval.randomization`` and every
+    evaluation task's own: each built once (a terrain file read and parsed), each problem one line naming where."""
+    from hierloco.envs.terrain import TerrainError, make_pushes, make_randomization, make_terrain
+
+    makers = {"terrain": make_terrain, "pushes": make_pushes, "randomization": make_randomization}
+    given = [("", key, get(c.cfg, key)) for key in ("terrain", "randomization")]
+    given += [("eval.", key, get(c.cfg, f"eval.{key}")) for key in WORLD_KEYS]
+    try:
+        specs = task_specs(c.cfg)
+    except Exception:  # noqa: BLE001  (a malformed eval section: check_eval says why)
+        specs = {}
+    given += [(f"eval task {name!r}: ", key, spec[key]) for name, spec in specs.items() if isinstance(spec, dict)
+              for key in WORLD_KEYS if spec.get(key) is not None]
+    for where, key, value in given:
+        if value is None:
+            continue
+        try:
+            makers[key](_plain(value))
+        except TerrainError as error:
+            text = str(error)
+            if where == "eval.":  # "eval.terrain 'rough': ...", "eval.pushes: ..."
+                c.fail(f"eval.{text}" if text.startswith(key) else f"eval.{key}: {text}")
+            else:
+                c.fail(f"{where}{text}" if where or text.startswith(key) else f"{key}: {text}")
 
 
 # ---------------------------------------------------------------------------------------------------- recipes
@@ -182,6 +294,7 @@ def check_common(c: Checker, robot_checks: bool = True) -> Any:
             c.fail(f"hardware: {error}")
     elif hardware is not None and len(hardware):
         c.fail("hardware.* options are given but no setting simulates the hardware robot (settings=[...,hardware])")
+    check_world(c)
     return robot
 
 
@@ -426,11 +539,9 @@ def _registry_of(dotted: str):
 
         return PLANNERS, BoxPlannerBase
     if dotted == "dynamics.model":
-        from torch import nn
+        from hierloco.components.com_model import MODELS, CoMModel
 
-        from hierloco.components.com_model import MODELS
-
-        return MODELS, nn.Module
+        return MODELS, CoMModel
     from hierloco.envs.tasks import TASKS, Task
 
     return TASKS, Task
@@ -438,7 +549,7 @@ def _registry_of(dotted: str):
 
 def check_import_paths(c: Checker) -> None:
     """Imports every import path of the config (:func:`import_paths`): each must name a class of its kind (a
-    ``BoxPlannerBase`` subclass for ``planner.name``, a torch module for ``dynamics.model``, a ``Task`` for a task),
+    ``BoxPlannerBase`` subclass for ``planner.name``, a ``CoMModel`` for ``dynamics.model``, a ``Task`` for a task),
     or it is one problem naming the key (``planner.name=os:getcwd`` names a function, ``json:JSONDecoder`` a class
     that plans nothing). Once imported, the registries know them under their paths for the rest of the run."""
     for dotted, reference in import_paths(c.cfg).items():

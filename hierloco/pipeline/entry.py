@@ -209,7 +209,7 @@ def describe_config(folder, name: str, arguments: list[str], config_name: str = 
         show()
     except SystemExit as done:
         return done.code if isinstance(done.code, int) else (0 if done.code is None else 1)
-    except HydraException as error:
+    except (HydraException, ValueError) as error:  # a bad override; flags Hydra will not combine (-m with --cfg)
         report_error(error)
         return EXIT_USER_ERROR
     finally:

@@ -1,30 +1,36 @@
-"""Evaluate a trained run on any tasks or planners: ``hierloco evaluate run_dir=... [overrides]``.
+"""Evaluate a trained run on any tasks or planners: ``hierloco evaluate run_dir=... [overrides]``, a Hydra app.
 
 One entry point serves every method: the run's ``run.json`` names its method (the method registry,
-:mod:`hierloco.pipeline.methods`, finds its recipe). The run's own config (``<run_dir>/config.yaml``) is the base;
-the overrides may change only what evaluation depends on (the ``eval`` and ``planner`` sections, ``settings``,
-threads, device, progress, logging) and use Hydra's override grammar (``+eval.tasks.goal_reaching_5m={task:
-goal_reaching, radius: 5}``, ``planner.name=cem``). ``-m`` (or ``--multirun``) sweeps: ``planner.num_candidates=
-1000,2000,4000`` evaluates the same trained run once per value, never training anything. The recipe runs with every
-training stage loaded (a missing one is an error) and each evaluation cached per task and planner; tables, figures
-and videos go to ``<run_dir>/evaluations/<name>/`` (``name=`` a plain name; default a digest of the evaluation
-config).
+:mod:`hierloco.pipeline.methods`, finds its recipe). The app's config is ``hierloco/recipes/conf/evaluate.yaml``: the
+run's own config (``<run_dir>/config.yaml``, read safely and given to Hydra as the config group option
+``trained_run/run``) is its base, the config groups ``planner`` (``planner=cem``) and ``planner_scale`` may be chosen
+over it, and the overrides may change only what evaluation depends on (:data:`EVALUATION_KEYS`: the ``eval`` and
+``planner`` sections, ``settings``, threads, device, progress, logging), in Hydra's override grammar
+(``+eval.tasks.goal_reaching_5m={task: goal_reaching, radius: 5}``, ``planner.name=cem``). Hydra answers ``--help``,
+``--cfg job`` and ``--info``; ``-m`` (or ``--multirun``) sweeps through Hydra's sweeper and launcher
+(``hydra/launcher=joblib`` runs the jobs in parallel): ``planner.num_candidates=1000,2000,4000`` evaluates the same
+trained run once per value, never training anything. The recipe runs with every training stage loaded (a missing
+one is an error) and each evaluation cached per task and planner; tables, figures and videos go to
+``<run_dir>/evaluations/<name>/``: ``name=`` a plain name; by default a digest of the evaluation config, and in a
+sweep the job's Hydra override dirname, which leaves out the settings that change no result (``progress``,
+``nthread``, logger settings: ``hydra.job.config.override_dirname.exclude_keys``).
 
-A run directory may come from someone else: its ``config.yaml`` and ``run.json`` are data. An import path in its
-config (``planner.name: some.module:Class``, a task's ``task:``, ``dynamics.model``;
-:func:`hierloco.pipeline.config.import_paths`) is imported only when the command line names it too, in an override
-(``planner.name=some.module:Class``) or in ``trust_imports=some.module:Class[,...]``; a registered name is used as it
-is (``docs/pipeline.md``).
+A run directory may come from someone else: its ``config.yaml`` and ``run.json`` are data. Its ``config.yaml`` is
+read with :func:`hierloco.io.load_yaml` first (a YAML bomb is refused before Hydra sees it) and may configure neither
+Hydra nor this command. An import path in it (``planner.name: some.module:Class``, a task's ``task:``,
+``dynamics.model``; :func:`hierloco.pipeline.config.import_paths`) is imported only when the command line names it
+too, in an override (``planner.name=some.module:Class``) or in ``trust_imports=some.module:Class`` (several:
+``trust_imports=[a.b:C,d.e:F]``); a registered name is used as it is (``docs/pipeline.md``).
 
 Example:
     hierloco train lat preset=small run_dir=runs/a1
     hierloco evaluate run_dir=runs/a1 '+eval.tasks.goal_reaching_5m={task: goal_reaching, radius: 5}'
-    hierloco evaluate -m run_dir=runs/a1 planner.name=random_shooting,cem
+    hierloco evaluate -m run_dir=runs/a1 planner=random_shooting,cem hydra/launcher=joblib
 """
 
 from __future__ import annotations
 
-import json
+import hashlib
 import os
 import re
 import sys
@@ -33,30 +39,15 @@ from pathlib import Path
 from hierloco.pipeline.errors import EXIT_INTERRUPTED, EXIT_USER_ERROR, ConfigError, one_line
 
 EVALUATION_KEYS = ("eval", "planner", "settings", "nthread", "device", "progress", "logger")
-USAGE = ("usage: hierloco evaluate [-m] run_dir=<trained run> [name=<label>] [trust_imports=<pkg.mod:Class>,"
-         "...] [eval/planner overrides]")
+EVALUATION_GROUPS = ("planner", "planner_scale")  # config groups of hierloco/recipes/conf an evaluation may choose
+COMMAND_KEYS = ("run_dir", "name", "trust_imports")  # this command's own keys, never the run's
+CONFIG_NAME = "evaluate"  # hierloco/recipes/conf/evaluate.yaml
+TRAINED_GROUP = "trained_run"  # the config group option (in Hydra's ConfigStore) holding the run's config.yaml
+FOLDER_RESOLVER = "hierloco.evaluation_folder"  # names a sweep job's folder (evaluate.yaml: hydra.sweep.subdir)
+USAGE = ("usage: hierloco evaluate [-m] run_dir=<trained run> [name=<label>] [trust_imports=<pkg.mod:Class>] "
+         "[planner=<type>] [eval/planner/... overrides]")
 NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.=,-]*")
 IMPORT_PATH = re.compile(r"[A-Za-z_][\w.]*:[A-Za-z_][\w.]*")  # package.module:Class, as typed in an override
-
-
-def split_arguments(arguments: list[str]) -> tuple[str | None, str | None, bool, list[str], list[str]]:
-    """``(run_dir, name, multirun, overrides, trust_imports)`` of the command line; ``trust_imports=a:B,c:D`` (or
-    ``[a:B,c:D]``) lists import paths the run's own files may name."""
-    run_dir = name = None
-    multirun = False
-    overrides, trusted = [], []
-    for argument in arguments:
-        if argument in ("-m", "--multirun"):
-            multirun = True
-        elif argument.startswith("run_dir="):
-            run_dir = argument.split("=", 1)[1]
-        elif argument.startswith("name="):
-            name = argument.split("=", 1)[1]
-        elif argument.startswith("trust_imports="):
-            trusted += [item.strip() for item in argument.split("=", 1)[1].strip("[]").split(",") if item.strip()]
-        else:
-            overrides.append(argument)
-    return run_dir, name, multirun, overrides, trusted
 
 
 def check_name(name: str) -> str:
@@ -67,38 +58,121 @@ def check_name(name: str) -> str:
     return name
 
 
-def _key_of(override: str) -> str:
-    return override.split("=", 1)[0].lstrip("+~").split(".")[0]
+def evaluation_folder(name, override_dirname) -> str:
+    """The folder under ``<run_dir>/evaluations/`` of a job of a sweep: ``name`` when given, else the job's Hydra
+    override dirname (its overrides but those of ``hydra.job.config.override_dirname.exclude_keys``), each character
+    other than letters, digits and ``_ . = , -`` replaced by ``_`` (a long one shortened by a digest); ``default``
+    for a job without overrides. Hydra's ``hydra.sweep.subdir`` (``evaluate.yaml``).
+
+        >>> evaluation_folder(None, "planner.num_candidates=1000,planner=cem")
+        'planner.num_candidates=1000,planner=cem'
+        >>> evaluation_folder(None, "+eval.tasks.far={task: goal_reaching}")
+        'eval.tasks.far=_task__goal_reaching_'
+        >>> evaluation_folder("mine", "planner=cem"), evaluation_folder(None, "")
+        ('mine', 'default')
+    """
+    if name is not None:
+        return str(name)
+    folder = re.sub(r"[^A-Za-z0-9_.=,-]", "_", str(override_dirname or "")).lstrip("_.=,-")
+    if len(folder) > 200:  # a file system's names end at 255 bytes
+        folder = f"{folder[:180]}-{hashlib.sha256(folder.encode()).hexdigest()[:12]}"
+    return folder or "default"
 
 
-def evaluation_config(run_dir: str, overrides: list[str]):
-    """The trained run's config with the evaluation ``overrides`` applied (refusing any other key)."""
-    from hydra import compose, initialize_config_dir
-    from hydra.core.global_hydra import GlobalHydra
+def _register_folder_resolver() -> None:
+    """Registers :func:`evaluation_folder` with OmegaConf (at import: a launcher's worker process imports this module
+    with the job's function, before Hydra resolves the job's folder)."""
+    from omegaconf import OmegaConf
+
+    if not OmegaConf.has_resolver(FOLDER_RESOLVER):
+        OmegaConf.register_new_resolver(FOLDER_RESOLVER, evaluation_folder)
+
+
+_register_folder_resolver()
+
+
+def conf_folder() -> Path:
+    """``hierloco/recipes/conf``: the shared config groups and ``evaluate.yaml``."""
+    from hierloco.recipes import conf
+
+    return Path(next(iter(conf.__path__))).resolve()
+
+
+def read_command_line(arguments: list[str]) -> tuple[list[str], str | None, str | None]:
+    """``(arguments, run_dir, name)`` of the command line, checked before Hydra runs it: every override (Hydra's
+    grammar, parsed by Hydra's parser) changes an evaluation key (:data:`EVALUATION_KEYS`), chooses an evaluation
+    config group (:data:`EVALUATION_GROUPS`), sets this command's keys or Hydra's own settings
+    (``hydra/launcher=joblib``); ``run_dir`` and ``name`` take one value and ``name`` is a plain name, given to a
+    sweep of one job only; ``trust_imports=a:B,c:D`` is passed on as the list ``trust_imports=[a:B,c:D]``."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    arguments = list(arguments)
+    positions = [i for i, argument in enumerate(arguments) if "=" in argument and not argument.startswith("-")]
+    parsed = OverridesParser.create().parse_overrides([arguments[i] for i in positions])
+    values: dict = {}
+    bad, sweeps = [], []
+    for position, override in zip(positions, parsed):
+        key = override.key_or_group
+        if override.is_hydra_override():
+            continue
+        if key in COMMAND_KEYS:
+            if override.is_sweep_override():
+                if key != "trust_imports":
+                    why = "one trained run per command" if key == "run_dir" else "a sweep names each by its overrides"
+                    raise ConfigError(f"{key}= takes one value, got {override.input_line!r} ({why})")
+                listed = ",".join(override.sweep_string_iterator())
+                arguments[position] = f"{override.get_key_element()}=[{listed}]"
+            values[key] = override.value()
+        elif re.split(r"[./@]", key)[0] not in (*EVALUATION_KEYS, *EVALUATION_GROUPS):
+            bad.append(override.input_line)
+        elif override.is_sweep_override():
+            sweeps.append(override.input_line)
+    if bad:
+        raise ConfigError(f"evaluate.py changes only {', '.join(EVALUATION_KEYS)} (and the config groups "
+                          f"{', '.join(EVALUATION_GROUPS)}); got {', '.join(bad)} (a training change needs hierloco "
+                          "train and another run_dir)")
+    run_dir, name = (None if values.get(key) is None else str(values[key]) for key in ("run_dir", "name"))
+    if name is not None:
+        check_name(name)
+        if sweeps:
+            raise ConfigError(f"name= names one evaluation; a sweep ({', '.join(sweeps)}) names each by its "
+                              "overrides")
+    return arguments, run_dir, name
+
+
+def trained_config(run_dir: str):
+    """The trained run's ``config.yaml`` (a :class:`~omegaconf.DictConfig`), read as a received file: safely first
+    (:func:`hierloco.io.load_yaml`: no YAML bomb reaches OmegaConf or Hydra), a mapping of settings that configures
+    neither Hydra (its ``hydra`` section would name code to run) nor this command."""
+    from omegaconf import OmegaConf
 
     from hierloco.io import load_yaml
 
     config = Path(run_dir) / "config.yaml"
     if not config.is_file():
-        raise ConfigError(f"{run_dir} has no config.yaml: it is not a finished training run (run train.py first)")
-    bad = [o for o in overrides if _key_of(o) not in EVALUATION_KEYS]
-    if bad:
-        raise ConfigError(f"evaluate.py changes only {', '.join(EVALUATION_KEYS)}; got {', '.join(bad)} (a "
-                          "training change needs train.py and another run_dir)")
-    load_yaml(config)  # a received file, read safely first: no YAML bomb reaches Hydra (ArtifactError: one line)
-    GlobalHydra.instance().clear()
+        raise ConfigError(f"{run_dir} has no config.yaml: it is not a finished training run (run hierloco train "
+                          "first)")
+    value = load_yaml(config)  # an ArtifactError naming the file: one line
+    if not isinstance(value, dict):
+        raise ConfigError(f"{config}: a run's config is a mapping of settings, not {type(value).__name__}")
+    foreign = [key for key in ("hydra", "defaults", "name", "trust_imports") if key in value]
+    if foreign:
+        raise ConfigError(f"{config} sets {', '.join(foreign)}: a run's config configures neither Hydra nor "
+                          "hierloco evaluate")
     try:
-        with initialize_config_dir(config_dir=str(config.parent.resolve()), version_base=None):
-            return compose(config_name="config", overrides=overrides)
-    except Exception as error:  # noqa: BLE001  (an unparsable config.yaml, a bad override): one line
-        from omegaconf.errors import OmegaConfBaseException
-        from hydra.errors import HydraException
+        return OmegaConf.load(config)  # Hydra's own reading of the same (checked) text, as recipes save it
+    except Exception as error:  # noqa: BLE001  (what the safe reading let through but OmegaConf refuses): one line
+        raise ConfigError(f"{config}: {one_line(error)}") from None
 
-        if isinstance(error, (HydraException, OmegaConfBaseException, ValueError)) or "yaml" in type(error).__module__:
-            raise ConfigError(f"{config}: {one_line(error)}") from None
-        raise
-    finally:
-        GlobalHydra.instance().clear()
+
+def store_trained_config(run_dir: str | None) -> None:
+    """Gives Hydra the run's config as the option ``run`` of the config group ``trained_run`` (``evaluate.yaml``'s
+    first default); empty without a run (``hierloco evaluate --cfg job``)."""
+    from hydra.core.config_store import ConfigStore
+    from omegaconf import OmegaConf
+
+    node = trained_config(run_dir) if run_dir is not None else OmegaConf.create({})
+    ConfigStore.instance().store(group=TRAINED_GROUP, name="run", node=node)
 
 
 def check_import_paths_given(cfg, overrides: list[str], run_dir: str, trusted=()) -> None:
@@ -110,7 +184,8 @@ def check_import_paths_given(cfg, overrides: list[str], run_dir: str, trusted=()
     bad = [item for item in trusted if not IMPORT_PATH.fullmatch(item)]
     if bad:
         raise ConfigError(f"trust_imports lists {', '.join(bad)}: give import paths (package.module:Class)")
-    typed = {match.group(0) for override in overrides for match in IMPORT_PATH.finditer(override)} | set(trusted)
+    unescaped = [re.sub(r"\\(.)", r"\1", override) for override in overrides]  # a sweep's job: os\:getcwd
+    typed = {match.group(0) for override in unescaped for match in IMPORT_PATH.finditer(override)} | set(trusted)
     received = {dotted: path for dotted, path in import_paths(cfg).items() if path not in typed}
     if received:
         listed = " ".join(f"{dotted}={path}" for dotted, path in received.items())
@@ -123,6 +198,8 @@ def check_import_paths_given(cfg, overrides: list[str], run_dir: str, trusted=()
 
 def method_of(run_dir: str):
     """The :class:`hierloco.pipeline.methods.Method` that made ``run_dir`` (its ``run.json``)."""
+    import json
+
     from hierloco.pipeline.methods import METHODS
     from hierloco.trained import MANIFEST
 
@@ -137,64 +214,119 @@ def method_of(run_dir: str):
         raise ConfigError(f"{manifest}: {error}") from None
 
 
-def sweep(overrides: list[str]) -> list[list[str]]:
-    """The jobs of a sweep over ``overrides`` (Hydra's grammar: ``a=1,2 b=x,y`` gives four)."""
-    from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
-    from hydra.core.override_parser.overrides_parser import OverridesParser
+def _trusted(value) -> list[str]:
+    """``trust_imports`` as a list of strings (one path, or a list of them)."""
+    from omegaconf import ListConfig
 
-    parsed = OverridesParser.create().parse_overrides(overrides)
-    return [job for batch in BasicSweeper.split_arguments(parsed, max_batch_size=None) for job in batch]
+    if value is None:
+        return []
+    return [str(item) for item in (value if isinstance(value, (list, tuple, ListConfig)) else [value])]
 
 
-def evaluate(run_dir: str, overrides: list[str], name: str | None = None, trust_imports=()) -> float:
-    """Evaluates the trained run in ``run_dir`` with ``overrides`` (``trust_imports``: import paths its config may
-    name, :func:`check_import_paths_given`); returns the headline cost."""
+def evaluate(cfg, overrides: list[str], folder: str | None = None) -> float:
+    """Evaluates the trained run of the composed evaluation config ``cfg`` (the run's config with ``overrides``, the
+    command line's, and this command's keys ``run_dir``, ``name``, ``trust_imports``) into
+    ``<run_dir>/evaluations/<folder>/`` (``folder``: the job's name; default a digest of the evaluation config);
+    returns the headline cost."""
     from omegaconf import OmegaConf, open_dict
 
+    from hierloco.io import inside
     from hierloco.pipeline.rundir import digest
 
-    from hierloco.io import inside
-
-    method = method_of(run_dir)
-    cfg = evaluation_config(run_dir, overrides)
-    check_import_paths_given(cfg, overrides, run_dir, trust_imports)
-    trained = OmegaConf.load(Path(run_dir) / "config.yaml").get("device", "cpu")
-    with open_dict(cfg):
+    run_dir = str(cfg.run_dir)
+    trusted = _trusted(cfg.get("trust_imports"))
+    with open_dict(cfg):  # the run's config as the recipe reads it: without this command's keys
+        for key in COMMAND_KEYS[1:]:
+            cfg.pop(key, None)
         cfg.run_dir = run_dir
+    method = method_of(run_dir)
+    check_import_paths_given(cfg, overrides, run_dir, trusted)
+    trained = trained_config(run_dir).get("device", "cpu")
+    with open_dict(cfg):
         if str(cfg.get("device")) != str(trained):  # evaluated elsewhere: the trained stages keep their keys
             cfg.trained_device = trained
-    label = check_name(name) if name is not None else digest(OmegaConf.to_container(cfg, resolve=True))[:8]
+    label = check_name(folder) if folder is not None else digest(OmegaConf.to_container(cfg, resolve=True))[:8]
     return method.main().run(cfg, evaluation_out=inside(run_dir, f"evaluations/{label}"))
 
 
+def evaluation_job(cfg) -> float:
+    """One evaluation, a Hydra job (a sweep's jobs may run in a launcher's worker processes): a single run goes to
+    ``evaluations/<name or digest>/``, a sweep's job to ``evaluations/<its override dirname>/``
+    (:func:`evaluation_folder`, the folder Hydra made for the job). A user's error is one line and exit status 2."""
+    from hydra.core.hydra_config import HydraConfig
+    from hydra.types import RunMode
+
+    from hierloco.pipeline.entry import one_line_errors
+
+    hydra_cfg = HydraConfig.get()
+    folder = None if cfg.get("name") is None else str(cfg.name)
+    if hydra_cfg.mode == RunMode.MULTIRUN:
+        folder = evaluation_folder(folder, hydra_cfg.job.override_dirname)
+    with one_line_errors():
+        return evaluate(cfg, list(hydra_cfg.overrides.task), folder)
+
+
+def help_text() -> str:
+    """``hierloco evaluate --help``: what it does (``evaluate.yaml``'s opening comment), how to call it, the config
+    groups an evaluation may choose and the keys it may change."""
+    from hierloco.pipeline.entry import config_groups
+
+    lines = (conf_folder() / f"{CONFIG_NAME}.yaml").read_text().splitlines()
+    about = [line.lstrip("# ").rstrip() for line in lines[:next(i for i, line in enumerate(lines)
+                                                                 if not line.startswith("#"))]]
+    groups = {group: options for group, options in config_groups(conf_folder()).items() if group in EVALUATION_GROUPS}
+    text = [f"hierloco evaluate: {about[0]}", *about[1:], "", USAGE,
+            "  (Hydra's override grammar; -m sweeps over comma-separated values, each job's folder named by its "
+            "overrides;", "   hydra/launcher=joblib runs them in parallel; --cfg job prints the composed config, "
+            "--info how it was composed)", "", f"keys it may change: {', '.join(EVALUATION_KEYS)}", "",
+            "config groups (group=option):", *[f"  {group}: {', '.join(options)}" for group, options in groups.items()]]
+    return "\n".join(text) + "\n\nconfig (key=value overrides any of it):\n"
+
+
+def run_app(arguments: list[str]) -> None:
+    """Runs the Hydra app (``evaluate.yaml`` over the stored run config, :func:`evaluation_job`) on ``arguments``."""
+    import hydra
+
+    app = hydra.main(config_path=str(conf_folder()), config_name=CONFIG_NAME, version_base=None)(evaluation_job)
+    saved = sys.argv
+    sys.argv = [saved[0] if saved else "hierloco evaluate", *arguments]
+    try:
+        app()
+    finally:
+        sys.argv = saved
+
+
 def evaluate_main(arguments: list[str] | None = None) -> None:
-    """The command line of ``recipes/evaluate.py``; exits 2 on a user error, printing one line."""
+    """The command line of ``hierloco evaluate`` (and ``recipes/evaluate.py``); exits 2 on a user error, printing
+    one line, before any work."""
     from hydra.errors import HydraException
 
-    from hierloco.pipeline.entry import one_line_errors, report_error, sigterm_as_interrupt
+    from hierloco.io import inside
+    from hierloco.pipeline.entry import information_only, one_line_errors, report_error, sigterm_as_interrupt
 
-    os.environ.setdefault("HYDRA_FULL_ERROR", "1")
+    os.environ.setdefault("HYDRA_FULL_ERROR", "1")  # Hydra raises its own errors; they are reported here
     sigterm_as_interrupt()
-    run_dir, name, multirun, overrides, trusted = split_arguments(sys.argv[1:] if arguments is None else arguments)
+    arguments = list(sys.argv[1:] if arguments is None else arguments)
     try:
         with one_line_errors():
-            if run_dir is None:
-                raise ConfigError(f"give the trained run: run_dir=... ({USAGE})")
-            jobs = sweep(overrides) if multirun else [overrides]
-            if multirun and name is not None and len(jobs) > 1:
-                raise ConfigError("name= names one evaluation; a sweep names each by its overrides")
-            for job in jobs:
-                label = name
-                if multirun and name is None:
-                    label = re.sub(r"[^A-Za-z0-9_.=,-]", "_", ",".join(job)) or "default"
-                    print(f"evaluation {label}: {' '.join(job) or '(the run config)'}", flush=True)
-                evaluate(run_dir, job, label, trusted)
+            arguments, run_dir, _ = read_command_line(arguments)
+            if "--help" in arguments or "-h" in arguments:
+                print(help_text(), end="")
+                arguments = ["--cfg", "job", *[a for a in arguments if a not in ("--help", "-h")]]
+            elif not information_only(arguments):
+                if run_dir is None:
+                    raise ConfigError(f"give the trained run: run_dir=... ({USAGE})")
+                method_of(run_dir)
+                inside(run_dir, "evaluations/multirun.yaml")  # where a sweep writes: never through a link
+            store_trained_config(run_dir)
+            run_app(arguments)
     except KeyboardInterrupt:
         print("interrupted: finished evaluations are kept; run the same command again to resume", file=sys.stderr)
         sys.exit(EXIT_INTERRUPTED)
-    except HydraException as error:
+    except HydraException as error:  # a bad override, an unknown config group option
         report_error(error)
         sys.exit(EXIT_USER_ERROR)
 
 
-__all__ = ["EVALUATION_KEYS", "evaluate", "evaluate_main", "evaluation_config"]
+__all__ = ["EVALUATION_GROUPS", "EVALUATION_KEYS", "evaluate", "evaluate_main", "evaluation_folder", "evaluation_job",
+           "trained_config"]

@@ -152,8 +152,11 @@ class Outputs:
             self.warnings.append(f"no video of {setting}/{name}: {why}")
             return
         try:
+            from hierloco.pipeline.config import world
+
             frames = report.task_video(evaluation, task, self.robot, path,
-                                       disabled_legs=fault_legs(self.robot, setting)[0])
+                                       disabled_legs=fault_legs(self.robot, setting)[0],
+                                       terrain=world(self.cfg, "evaluation", name).terrain)
         except Exception as error:  # noqa: BLE001  (rendering is optional)
             self.warn(f"the video of {setting}/{name}", error)
             return

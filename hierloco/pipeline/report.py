@@ -176,9 +176,11 @@ def task_figures(evaluation: TaskEvaluation, task, robot, figures: Path, *, meth
     return paths
 
 
-def task_video(evaluation: TaskEvaluation, task, robot, path: Path, *, disabled_legs=()) -> np.ndarray | None:
-    """Renders the first episode of a task (MuJoCo offscreen, 20 fps) with its goals or path drawn on the floor and
-    its obstacles in place; returns the frames (``T x H x W x 3``), or ``None`` when the evaluation kept no joint positions."""
+def task_video(evaluation: TaskEvaluation, task, robot, path: Path, *, disabled_legs=(),
+               terrain=None) -> np.ndarray | None:
+    """Renders the first episode of a task (MuJoCo offscreen, 20 fps) on its ground (``terrain``, default flat) with
+    its goals or path drawn on it and its obstacles in place; returns the frames (``T x H x W x 3``), or ``None``
+    when the evaluation kept no joint positions."""
     from hierloco.render import render_frames, save_video
 
     qpos = evaluation.recording.get("qpos")
@@ -188,7 +190,7 @@ def task_video(evaluation: TaskEvaluation, task, robot, path: Path, *, disabled_
     markers = task.markers(episode=0)
     markers = markers[:: max(1, len(markers) // 40)]
     frames = render_frames(robot, qpos[0, ::stride], disabled_legs=disabled_legs, markers=markers,
-                           obstacles=task.obstacles)
+                           obstacles=task.obstacles, terrain=terrain)
     save_video(frames, path, fps=VIDEO_FPS)
     return frames
 

@@ -26,7 +26,7 @@ from hierloco.envs.faults import fault_legs, is_unadapted, physical_setting, set
 from hierloco.envs.robots import CONTROL_TIMESTEP, hardware_options
 from hierloco.errors import Finding
 from hierloco.pipeline import report
-from hierloco.pipeline.config import make_task_from_spec, section, task_specs
+from hierloco.pipeline.config import WORLD_KEYS, World, make_task_from_spec, make_world, section, task_specs, world
 from hierloco.pipeline.plan import JsonReport, SettingPlan, Stage
 from hierloco.pipeline.rundir import digest
 from hierloco.results import TaskEvaluation
@@ -213,10 +213,12 @@ def hardware_params(cfg, setting: str) -> dict:
 
 
 def dynamics_data_stage(cfg, low_level: dict, setting: str, robot) -> Stage:
+    """The CoM dynamics data of ``setting``, collected in the run's world (``terrain``, ``randomization``; keyed only
+    when not flat and nominal: :class:`hierloco.pipeline.config.World`)."""
     d = section(cfg, "dynamics")
     locked, limp = fault_legs(robot, setting)
     params = {"seed": cfg.seed, "setting": setting, "disabled_legs": list(locked), "limp_legs": list(limp),
-              **{k: d[k] for k in DATA_KEYS}, **hardware_params(cfg, setting)}
+              **{k: d[k] for k in DATA_KEYS}, **hardware_params(cfg, setting), **world(cfg, "data").params()}
     return Stage(f"dynamics_data_{setting}", params, {"low_level": low_level},
                  f"dynamics_data_{setting}.npz", "hierloco.components.dynamics_data:TransitionData",
                  build_dynamics_data)
@@ -230,7 +232,8 @@ def build_dynamics_data(run, params, make_low_level) -> TransitionData:
     env = LatentActionEnv(make_low_level(params["num_robots"]), num_robots=params["num_robots"],
                           disabled_legs=params["disabled_legs"], limp_legs=params["limp_legs"], seed=params["seed"],
                           nthread=run.nthread,
-                          robot=setting_robot(run.robot, params["setting"], params.get("hardware")))
+                          robot=setting_robot(run.robot, params["setting"], params.get("hardware")),
+                          **stage_world(run, params, "data").options())
     try:
         return collect_transitions(env, params["num_transitions"], episode_length=params["episode_length"],
                                    seed=params["seed"], progress=run.progress)
@@ -275,9 +278,10 @@ def build_dynamics_model(run, params, data: TransitionData, low_level) -> Traine
 
 # ---------------------------------------------------------------------------------------------------- evaluation
 def evaluation_stage(cfg, name: str, spec: dict, setting: str, model: Stage, low_level: dict) -> Stage:
-    """MPC on one task; cached per task and planner (the file name carries the key's digest)."""
-    params = {"seed": cfg.seed, "device": cfg.device, "setting": setting, "task_name": name, "task": spec,
-              "planner": planner_params(cfg), **hardware_params(cfg, setting)}
+    """MPC on one task; cached per task and planner (the file name carries the key's digest), in the task's world
+    (:func:`evaluation_params`)."""
+    params = {"seed": cfg.seed, "device": cfg.device, "setting": setting, "task_name": name,
+              "planner": planner_params(cfg), **hardware_params(cfg, setting), **evaluation_params(cfg, name, spec)}
     after = {"model": model.digest, "low_level": low_level}
     key_digest = digest({"params": params, "after": after})
     return Stage(f"evaluation_{setting}_{name}", params, after, f"evaluation/{setting}/{name}-{key_digest}.npz",
@@ -303,17 +307,57 @@ def planner_params(cfg) -> dict:
 def build_evaluation(run, params, make_low_level, model: TrainedCoMModel) -> TaskEvaluation:
     """Closed-loop MPC on every episode of a task, one robot per episode, re-planning after every action."""
     task = make_task_from_spec(params["task_name"], params["task"])
+    world_ = stage_world(run, params, "evaluation")
     rollout = evaluation_rollout(run.robot, params, task, make_low_level(task.num_episodes), model,
-                                 nthread=run.nthread, progress=run.progress)
-    return report.task_evaluation(rollout, task, method=run.method, robot=run.robot.name, setting=params["setting"],
-                                  seed=params["seed"])
+                                 nthread=run.nthread, progress=run.progress, world=world_)
+    evaluation = report.task_evaluation(rollout, task, method=run.method, robot=run.robot.name,
+                                        setting=params["setting"], seed=params["seed"])
+    return world_evaluation(evaluation, rollout, task, world_, steps_per_action=run.cfg.steps_per_action)
+
+
+def evaluation_params(cfg, name: str, spec: dict) -> dict:
+    """What an evaluation's key holds of its task (``task``: its type and options, without its world) and of the
+    world it runs in (:func:`hierloco.pipeline.config.world`: ``terrain``, ``pushes``, ``randomization``, each only
+    when it is not the default, so flat evaluations keep their keys). Shared by every method's evaluations."""
+    return {"task": {key: value for key, value in spec.items() if key not in WORLD_KEYS},
+            **world(cfg, "evaluation", name).params()}
+
+
+def stage_world(run, params: dict, part: str) -> World:
+    """The world a stage simulates in (``part``: ``data``, ``training`` or ``evaluation``), built from the run's
+    config (a terrain file read again) and checked to be the one its key holds (``params``)."""
+    built = world(run.cfg, part, params.get("task_name") if part == "evaluation" else None)
+    keyed = {key: params[key] for key in WORLD_KEYS if key in params}
+    if built.params() != keyed:
+        raise RuntimeError(f"the {part} world of the config ({built.params()}) is not the stage's ({keyed})")
+    return built
+
+
+def world_evaluation(evaluation: TaskEvaluation, rollout, task, world_: World, *,
+                     steps_per_action: int) -> TaskEvaluation:
+    """``evaluation`` with what the world did, when it is not the default (flat, no pushes, nominal: the evaluation
+    as it was): per episode ``fell`` (and with pushes ``pushes``, ``push_falls``, ``recovery_s``), the summary
+    (``fall_rate``, ``push_fall_rate``, ``recovery_s``, ...: :func:`hierloco.components.evaluation.world_metrics`)
+    and the world in its metadata."""
+    if world_.is_default:
+        return evaluation
+    from hierloco.components.evaluation import world_metrics
+
+    per_episode, summary = world_metrics(rollout, task, steps_per_action=steps_per_action,
+                                         pushes=world_.pushes.active)
+    for index, row in enumerate(evaluation.rows):
+        row.update({name: float(values[index]) for name, values in per_episode.items()})
+    evaluation.metrics.update(summary)
+    evaluation.metadata.update({"world": world_.describe(), **world_.params()})
+    return evaluation
 
 
 def evaluation_rollout(robot, params: dict, task, low_level, model: TrainedCoMModel, *, nthread=None,
-                       progress: bool = False):
+                       progress: bool = False, world: World | None = None):
     """The :class:`~hierloco.components.evaluation.TaskRollout` of an evaluation stage's ``params`` (setting,
-    planner, seed, device, hardware): what :func:`build_evaluation` scores, and what ``recipes/adverse/trace.py``
-    replays from a finished run's evaluation key."""
+    planner, seed, device, hardware, world): what :func:`build_evaluation` scores, and what
+    ``recipes/adverse/trace.py`` replays from a finished run's evaluation key. ``world``: the built world
+    (:func:`stage_world`; default: made from the key, which a terrain file's key cannot: its path is not in it)."""
     from hierloco.components.evaluation import run_task
     from hierloco.components.planners import make_planner
     from hierloco.envs.latent_env import LatentActionEnv
@@ -324,9 +368,11 @@ def evaluation_rollout(robot, params: dict, task, low_level, model: TrainedCoMMo
     world_model.set_risk(planner_section.get("risk", "none"), planner_section.get("beta", 1.0))
     planner = make_planner(world_model, seed=params["seed"], **params["planner"])
     locked, limp = fault_legs(robot, params["setting"])
+    if world is None:
+        world = make_world({key: params.get(key) for key in WORLD_KEYS})
     env = LatentActionEnv(low_level, num_robots=task.num_episodes, disabled_legs=locked, limp_legs=limp,
                           record=True, seed=params["seed"], nthread=nthread, obstacles=task.obstacles,
-                          robot=setting_robot(robot, params["setting"], params.get("hardware")))
+                          robot=setting_robot(robot, params["setting"], params.get("hardware")), **world.options())
     try:
         return run_task(env, planner, task, progress=progress)
     finally:

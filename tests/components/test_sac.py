@@ -196,10 +196,8 @@ def test_train_sac_learns_resumes_and_refuses_other_settings(tmp_path):
 
 
 @pytest.mark.slow
-def test_compiled_update_matches_eager(request):
+def test_compiled_update_matches_eager():
     """torch.compile of the loss gives the eager loss terms (same weights, same batch, same random draws)."""
-    if "slow" not in (request.config.getoption("markexpr") or ""):
-        pytest.skip("compiles for about a minute: run with -m slow")
     import torch._inductor.config as inductor_config
 
     batch = _bandit_batch(64, lambda o: o[:, :2], torch.Generator().manual_seed(0))

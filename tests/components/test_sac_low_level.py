@@ -143,11 +143,9 @@ def test_tracking_evaluation_on_the_ik_expert():
 
 
 @pytest.mark.slow
-def test_training_learns_to_track(request):
+def test_training_learns_to_track():
     """100,000 frames (about 3,000 updates, several minutes here): the tracking error falls to at most 60 % of
     its value under the initial random actions (measured: 0.58 -> 0.18 m/s)."""
-    if "slow" not in (request.config.getoption("markexpr") or ""):
-        pytest.skip("trains for several minutes: run with -m slow")
     result = train_sac_low_level("a1", total_frames=100_000, num_robots=32, hidden=256, batch_size=256,
                                  log_every=20_000, progress=False)
     curve = result.metadata["learning_curve"]

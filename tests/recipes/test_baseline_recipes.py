@@ -97,6 +97,7 @@ def test_a_killed_sac_high_level_resumes_from_its_checkpoint(tmp_path):
 
     from hierloco.components.low_level import CommandLowLevel
     from hierloco.components.sac import SACAgent
+    from hierloco.pipeline.config import compose_recipe
     from hierloco.pipeline.rundir import RunDirectory
     from hierloco.recipes.sac.utils import train_high_level
 
@@ -106,9 +107,10 @@ def test_a_killed_sac_high_level_resumes_from_its_checkpoint(tmp_path):
     checkpoint = tmp_path / "sac_velocity_tracking.training.pt"
 
     directory = RunDirectory(tmp_path)
+    cfg = compose_recipe("sac", ["preset=tiny"])  # flat ground, nominal dynamics: the world the stage runs in
 
     def train(logger, **changed):
-        run = SimpleNamespace(path=tmp_path, dir=directory, nthread=1, progress=False, logger=logger)
+        run = SimpleNamespace(path=tmp_path, dir=directory, nthread=1, progress=False, logger=logger, cfg=cfg)
         return train_high_level(run, {**params, **changed}, lambda n: CommandLowLevel("a1", n, steps_per_action=10))
 
     with pytest.raises(KeyboardInterrupt):

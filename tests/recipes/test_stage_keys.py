@@ -1,22 +1,21 @@
 """Cache keys are complete: every config value that changes an artifact is in the key of the stages it changes (and
 of everything downstream), and nothing else is.
 
-Each recipe's plan of stages is computed for its tiny config, then for the config with one value changed; the set
-of stages whose key changed is compared with what must rebuild. (A changed key refuses a training stage and gives
-an evaluation a new cached file; ``test_lat_recipe.py`` checks both end to end.)
+The plan of stages of every method that hierloco ships (read from the registry,
+:data:`hierloco.pipeline.methods.METHODS`: a new recipe folder is checked with nothing listed here) is computed for its
+tiny config, then for the config with one value changed; the set of stages whose key changed is compared with what
+must rebuild. (A changed key refuses a training stage and gives an evaluation a new cached file;
+``test_lat_recipe.py`` checks both end to end.)
 """
-
-import importlib
-from pathlib import Path
 
 import pytest
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf, open_dict
 
 from hierloco.pipeline.config import prepare
+from hierloco.pipeline.methods import METHODS
 
-ROOT = Path(__file__).resolve().parents[2]
-RECIPES = ("lat", "lib", "ik", "sac", "sac_sac")
+RECIPES = [name for name in METHODS.names() if METHODS[name].package.startswith("hierloco.recipes.")]
 # what changes no artifact: where results go, how they are shown, how fast they are computed
 NOT_IN_KEYS = ("run_dir", "progress", "nthread", "preset_name", "logger.", "eval.figures", "eval.videos",
                "checks.")  # checks stop a run; they change no artifact
@@ -28,13 +27,13 @@ CONFIGS: dict = {}
 def config(recipe: str):
     """The recipe's tiny config (a fresh copy)."""
     if recipe not in CONFIGS:
-        with initialize_config_dir(config_dir=str(ROOT / "recipes" / recipe), version_base=None):
+        with initialize_config_dir(config_dir=str(METHODS[recipe].folder), version_base=None):
             CONFIGS[recipe] = compose(config_name="config", overrides=["preset=tiny"])
     return CONFIGS[recipe].copy()
 
 
 def plan_digests(recipe: str, cfg) -> dict[str, str]:
-    utils = importlib.import_module(f"hierloco.recipes.{recipe}.utils")
+    utils = METHODS[recipe].utils()
     robot = prepare(cfg, utils.checks)
     return {stage.name: stage.digest for stage in utils.plan(cfg, robot)}
 
@@ -130,7 +129,7 @@ def test_the_hardware_settings_keys():
     cfg = config("lat")
     with open_dict(cfg):
         cfg.settings = ["hardware_unadapted", "hardware"]
-    utils = importlib.import_module("hierloco.recipes.lat.utils")
+    utils = METHODS["lat"].utils()
     plan = {stage.name: stage for stage in utils.plan(cfg, prepare(cfg, utils.checks))}
     assert "dynamics_model_normal" in plan and "evaluation_normal_goal_reaching" not in plan
     assert not any(name.startswith("dynamics_data_hardware_unadapted") for name in plan)

@@ -101,7 +101,7 @@ def test_a_list_option_given_a_scalar_is_a_one_item_list():
 
 def test_lib_and_sac_own_checks(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    code, stderr = run_in_process("lib", "preset=tiny", "planner=paper")
+    code, stderr = run_in_process("lib", "preset=tiny", "planner=random_shooting")
     assert code == 2 and "unknown planner 'random_shooting'" in stderr
     code, stderr = run_in_process("sac", "preset=tiny", "settings=[normal,legs_disabled]")
     assert code == 2 and "normal setting only" in stderr

@@ -255,3 +255,28 @@ def test_a_new_study_is_its_own_folder_and_its_claims_are_judged_and_rendered(tm
         for name in ("toy_study.claims", "toy_study"):
             sys.modules.pop(name, None)
     assert "toy/verdicts.md" not in pages(load(results))
+
+
+def test_the_paper_page_states_its_rule_correction_seeds_and_thresholds(tmp_path):
+    """Each verdict with its deciding p, its verdict after Holm's correction within its claim and at the pre-planned
+    seeds; the tally raw and corrected; the tally under other thresholds with the measured noise of the floor."""
+    from hierloco import stats
+
+    paper = pages(load(results_tree(tmp_path / "results")))["paper_check.md"]
+    assert "The rule is not symmetric" in paper and "Holm's correction within each claim" in paper
+    rows = [line.split(" | ") for line in paper.splitlines()
+            if line.startswith("| a1 |") and line.endswith(("| pooled |", "| compare_full |"))]
+    assert rows and all(row[-3] in stats.VERDICTS and row[-2] in (*stats.VERDICTS, "same seeds") for row in rows)
+    assert any("(p = " in row[-4] for row in rows)
+    section = paper[paper.index("## How the tally depends on the thresholds"):]
+    assert "| no floor (relative criteria only) |" in section and "| Benjamini-Hochberg over every check" in section
+    assert "**The floor against the noise.**" in section   # LAT, LIB, IK walk the path here: their seed spread
+
+
+def test_claims_nothing_here_can_test_are_listed_with_the_reason(tmp_path):
+    paper = pages(load(results_tree(tmp_path / "results")))["paper_check.md"]
+    listed = paper[paper.index("## Claims not measured yet, or not testable here"):]
+    for words in ("gait transitions \"if needed by the task\" on A1", "interpolate, and extrapolate",
+                  "learned jointly", "the hardware gap's causes", "slipping \"and other unobserved factors"):
+        row = next(line for line in listed.splitlines() if words in line)
+        assert "| not testable here |" in row, row

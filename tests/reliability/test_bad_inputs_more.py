@@ -43,6 +43,7 @@ def test_a_run_directory_under_a_file_is_one_line(tmp_path):
     assert blocker.read_text() == "a file, not a directory\n" and sorted(tmp_path.iterdir()) == [blocker]
 
 
+@pytest.mark.slow  # a whole study (about a minute)
 def test_task_names_that_read_as_numbers_are_names_in_a_study(tiny_lat_run, tmp_path):
     """Tasks named ``nan`` and ``inf`` in a study's job: its record keeps them as names (not the float NaN and
     infinity the record stores non-finite numbers as), so the study's table lists them; unquoted in Hydra's grammar

@@ -259,7 +259,7 @@ def test_a_trusted_import_path_in_a_received_config_evaluates(copy_run):
     ("planner.name=json:JSONDecoder", "planner 'json:JSONDecoder' is the class json.decoder.JSONDecoder, not a "
                                       "BoxPlannerBase subclass"),
     ("dynamics.model=os:getcwd", "dynamics.model: dynamics_model 'os:getcwd' is a function (posix.getcwd), not a "
-                                 "Module subclass"),
+                                 "CoMModel subclass"),
     ("+eval.tasks.goal_reaching.task=json:JSONDecoder", "eval.tasks.goal_reaching.task: task 'json:JSONDecoder' is "
                                                         "the class json.decoder.JSONDecoder, not a Task subclass"),
     ("planner.name=no_such_module:Planner", "cannot import it (ModuleNotFoundError"),

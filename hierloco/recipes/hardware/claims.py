@@ -114,6 +114,19 @@ PAPER_CLAIMS = (
           where="Abstract; Sec. IV-D; Fig. 1, 8, 10a", paper=DAISY_HARDWARE, source="hardware", key="hardware_solves"),
     Claim(order=10, words="on hardware \"its performance was worse than in simulation\"", where="Sec. IV-D",
           paper=DAISY_HARDWARE, source="hardware", key="hardware_worse"),
+    Claim(order=10.1, words="slipping \"and other unobserved factors are directly absorbed in our dynamics\"",
+          where="Sec. III-C", status="not testable here",
+          needs="a measure of foot slip per latent action beside the CoM velocity it gives: the records hold "
+                "per-episode costs, not slip"),
+    Claim(order=10.2, words="controllers with lower CoM height or large roll and pitch give slower CoM motion, "
+                            "absorbed by the dynamics", where="Sec. III-C", status="not testable here",
+          needs="each latent's CoM height, roll and pitch beside its velocity: not recorded"),
+    Claim(order=10.3, words="the hardware gap's causes (1/5 of the samples; noisy joint tracking, slipping and CoM "
+                            "estimation; fast controllers that did not transfer), and that more hardware samples "
+                            "would reduce it", where="Sec. IV-D", status="not testable here",
+          needs="a verdict over seeds per factor: the factors are studied one at a time in `hardware_a1_factors/` and "
+                "`hardware_daisy_factors/` (their READMEs) without a stated test, and no study varies the samples on "
+                "the perturbed robot"),
     Claim(order=100, words="the same results on the real Daisy (Fig. 8, 10a)", where="Sec. IV-D",
           needs="a real robot: the hardware studies here perturb a simulated copy (mass, motors, friction, latency, "
                 "CoM noise), which is what they measure"),

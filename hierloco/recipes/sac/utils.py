@@ -73,9 +73,9 @@ def task_kind(name: str, spec: dict) -> str:
 def sac_stage(cfg, name: str, spec: dict, low_level: dict) -> Stage:
     """The SAC agent of task ``name``, trained on its training split whichever split is evaluated (``split: train``
     evaluates the training targets only, as tuning does: the same agent, so its key leaves the split out)."""
-    trained_on = {k: v for k, v in spec.items() if k != "split"}
+    trained_on = {k: v for k, v in spec.items() if k != "split" and k not in config.WORLD_KEYS}
     params = {"seed": cfg.seed, "device": stages.training_device(cfg), "task_name": name, "task": trained_on,
-              **sac_params(cfg)}
+              **sac_params(cfg), **config.world(cfg, "training").params()}  # terrain, randomization: docs/terrain.md
     return Stage(f"sac_{name}", params, {"low_level": low_level}, f"sac_{name}.pt", "hierloco.components.sac:SACAgent",
                  train_high_level)
 
@@ -92,15 +92,17 @@ def sac_params(cfg) -> dict:
 
 
 def sac_evaluation_stage(cfg, name: str, spec: dict, agent: Stage) -> Stage:
-    params = {"seed": cfg.seed, "setting": "normal", "task_name": name, "task": spec}
+    params = {"seed": cfg.seed, "setting": "normal", "task_name": name, **stages.evaluation_params(cfg, name, spec)}
     after = {"agent": agent.digest}
     key_digest = digest({"params": params, "after": after})
     return Stage(f"evaluation_normal_{name}", params, after, f"evaluation/normal/{name}-{key_digest}.npz",
                  TaskEvaluation, build_evaluation)
 
 
-def task_env(low_level, task: Task, num_robots: int, seed: int, nthread: int | None = None) -> TransformedEnv:
-    """``num_robots`` robots on ``task``, robot ``b`` on episode ``b % episodes``, with the goal observation."""
+def task_env(low_level, task: Task, num_robots: int, seed: int, nthread: int | None = None,
+             world=None) -> TransformedEnv:
+    """``num_robots`` robots on ``task``, robot ``b`` on episode ``b % episodes``, with the goal observation, in
+    ``world`` (a :class:`hierloco.pipeline.config.World`; default flat, nominal)."""
     import torch
     from torchrl.envs import Compose, TransformedEnv
 
@@ -108,7 +110,8 @@ def task_env(low_level, task: Task, num_robots: int, seed: int, nthread: int | N
     from hierloco.envs.transforms import GoalObservation, task_transforms
 
     episodes = torch.arange(num_robots, device="cpu") % task.num_episodes
-    env = LatentActionEnv(low_level, num_robots=num_robots, seed=seed, nthread=nthread)
+    env = LatentActionEnv(low_level, num_robots=num_robots, seed=seed, nthread=nthread,
+                          **(world.options() if world is not None else {}))
     return TransformedEnv(env, Compose(task_transforms(task, episodes), GoalObservation(task)))
 
 
@@ -127,7 +130,8 @@ def train_high_level(run, params, make_low_level) -> SACAgent:
     agent = SACAgent.build(GoalObservation.SIZE, low_level.action_low, low_level.action_high, hidden=params["hidden"],
                            lr=params["lr"], gamma=params["gamma"], tau=params["tau"], seed=params["seed"],
                            device=params["device"], compile_update=params.get("compile", False))
-    env = task_env(low_level, task, params["num_robots"], params["seed"], nthread=run.nthread)
+    env = task_env(low_level, task, params["num_robots"], params["seed"], nthread=run.nthread,
+                   world=stages.stage_world(run, params, "training"))
     checkpoint = run.path / f"sac_{params['task_name']}.training.pt"
     try:
         agent.metadata = train_sac(env, agent, total_frames=params["total_frames"],
@@ -156,15 +160,17 @@ def build_evaluation(run, params, agent: SACAgent, make_low_level) -> TaskEvalua
     from hierloco.envs.transforms import GoalObservation
 
     task = make_task_from_spec(params["task_name"], params["task"])
+    world = stages.stage_world(run, params, "evaluation")
     env = LatentActionEnv(make_low_level(task.num_episodes), num_robots=task.num_episodes, record=True,
-                          seed=params["seed"], nthread=run.nthread, obstacles=task.obstacles)
+                          seed=params["seed"], nthread=run.nthread, obstacles=task.obstacles, **world.options())
     try:
         rollout = run_task(env, ActorPolicy(agent.actor_on("cpu")), task, transforms=[GoalObservation(task)],
                            progress=run.progress)
     finally:
         env.close()
-    return report.task_evaluation(rollout, task, method=run.method, robot=run.robot.name, setting="normal",
-                                  seed=params["seed"])
+    evaluation = report.task_evaluation(rollout, task, method=run.method, robot=run.robot.name, setting="normal",
+                                        seed=params["seed"])
+    return stages.world_evaluation(evaluation, rollout, task, world, steps_per_action=run.cfg.steps_per_action)
 
 
 def manifest(cfg, robot) -> dict:

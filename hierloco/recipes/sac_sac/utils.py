@@ -38,7 +38,8 @@ def plan(cfg, robot) -> Plan:
     """SAC low level -> its tracking report -> per main task: a SAC high level over the command, its evaluations."""
     from hierloco.envs.robots import robot_fingerprint
 
-    low = Stage("sac_low_level", {"seed": cfg.seed, **config.section(cfg, "low_level"), **low_level_device(cfg)},
+    low = Stage("sac_low_level", {"seed": cfg.seed, **config.section(cfg, "low_level"), **low_level_device(cfg),
+                                  **config.world(cfg, "training").params()},  # terrain, randomization
                 {"robot": robot_fingerprint(robot)}, "sac_low_level.pt",
                 "hierloco.components.sac_low_level:TrainedSACLowLevel", build_low_level)
     report = Stage("sac_low_level_tracking", {"seed": cfg.seed, "steps_per_action": cfg.steps_per_action,
@@ -62,9 +63,10 @@ def build_low_level(run, params) -> TrainedSACLowLevel:
     from hierloco.components.sac_low_level import train_sac_low_level
 
     checkpoint = run.path / "sac_low_level.training.pt"
+    options = {key: value for key, value in params.items() if key not in config.WORLD_KEYS}
     trained = train_sac_low_level(run.robot, checkpoint_path=checkpoint, nthread=run.nthread, progress=run.progress,
                                   logger=run.logger, log_every=max(params["num_robots"], params["total_frames"] // 50),
-                                  **params)
+                                  **options, **stages.stage_world(run, params, "training").options())
     run.dir.count_interrupted_seconds(trained.metadata["seconds"]["before_resume"])
     checkpoint.unlink(missing_ok=True)  # the training state (with its replay buffer) is not needed any more
     return trained

@@ -34,8 +34,9 @@ from pathlib import Path
 import numpy as np
 
 from hierloco import stats
-from hierloco.claims import (CLAIMS, NOT_MEASURED, Check, ClaimRegistry, Evidence, Source, Study, checks_markdown,
-                             counts_line, load, locate)
+from hierloco.claims import (CLAIMS, NOT_MEASURED, PLANNED_SEEDS, Check, ClaimRegistry, Evidence, Source, Study,
+                             checks_markdown, corrected, counts_line, counts_line_of, is_borderline, load, locate,
+                             planned, redecided, seed_costs, verdict_text)
 from hierloco.evidence import Run, replicates
 from hierloco.io import write_text
 
@@ -70,16 +71,26 @@ def paper_claims(checks: dict[str, list[Check]], registry: ClaimRegistry = CLAIM
 # --- pages ---------------------------------------------------------------------------------------------------------
 
 CRITERIA = (f"Each claim is decided by a test over seeds (`docs/statistics.md`; `hierloco.stats`), alpha = "
-            f"{stats.ALPHA}: \"better\" holds when the cost is significantly lower (one-sided Welch t; paired by "
-            f"seed where both sides are the same seed's runs) by at least {stats.MIN_EFFECT_REL:.0%} of the other's "
-            f"mean cost (and {stats.MIN_EFFECT_ABS}), and does not hold when the gain is significantly below that; "
-            f"\"close\" is an equivalence test (TOST) within {stats.EQUIV_MARGIN_REL:.0%} of the reference's mean "
-            f"cost (at least {stats.EQUIV_MARGIN_ABS}), and does not hold when the difference is significantly "
-            f"outside that, either way; a comparison of methods all at {stats.NOT_TESTABLE_COST} of standing still's "
-            f"cost or worse is not testable here; a claim neither established nor refuted is inconclusive at this "
-            f"many seeds. A claim of several comparisons holds when each does, and does not hold when one is refuted "
-            f"at alpha / comparisons. d: the difference of the means (better: the cost saved) with its "
-            f"{1 - 2 * stats.ALPHA:.0%} interval, p: the one-sided p-value that would establish the claim.")
+            f"{stats.ALPHA}, d the difference of the means (better: the cost saved) with its "
+            f"{1 - 2 * stats.ALPHA:.0%} interval. The rule, exactly: \"better\" **holds** when the one-sided Welch t "
+            f"(paired by seed where both sides are the same seed's runs) of d > 0 gives p < alpha (the interval's "
+            f"lower end above 0) **and** the point estimate d is at least the minimum effect delta = max("
+            f"{stats.MIN_EFFECT_REL:.0%} of the other's mean cost, {stats.MIN_EFFECT_ABS}); it **does not hold** when "
+            f"the one-sided test of d < delta gives p < alpha / comparisons (refuting p, below). The rule is not "
+            f"symmetric: holding asks for significance against 0 and a point estimate at or above delta, not "
+            f"significance against delta, so a verdict of \"holds\" does not mean \"lower by at least delta\"; a gain "
+            f"whose interval straddles delta is inconclusive. \"close\" (TOST) **holds** when the interval of d lies "
+            f"inside (-m, m), m = max({stats.EQUIV_MARGIN_REL:.0%} of the reference's mean cost, "
+            f"{stats.EQUIV_MARGIN_ABS}), and **does not hold** when the 1 - alpha / comparisons interval lies wholly "
+            f"outside [-m, m], either way. A comparison of methods all at {stats.NOT_TESTABLE_COST} of standing "
+            f"still's cost or worse is not testable here; a claim neither established nor refuted is inconclusive at "
+            f"this many seeds. A claim of several comparisons holds when each does (p: the largest), and does not "
+            f"hold when one is refuted at alpha / comparisons (refuting p: the smallest times the comparisons). Beside "
+            f"each verdict: the p that decided it, \"borderline\" where it lies in [{stats.BORDERLINE[0]}, "
+            f"{stats.ALPHA}) or the multiplicity correction changes it, the verdict after Holm's correction over its "
+            f"family (establishing and refuting p-values adjusted separately; a verdict that does not survive becomes "
+            f"inconclusive), and the verdict at the pre-planned {PLANNED_SEEDS} seeds (0-2) where seeds were added "
+            f"after a look.")
 
 
 def _generated(source: str) -> str:
@@ -94,7 +105,7 @@ def study_page(study: Study, checks: list[Check], evidence: Evidence) -> str:
     if study.causes is not None and (path := locate(evidence.results, f"{name}/causes.yaml")) is not None:
         causes = study.causes(path)
     body = checks_markdown(checks, title="x", causes=causes, criteria="", paper_column=study.paper_column,
-                           with_causes=study.causes is not None)
+                           with_causes=study.causes is not None, family=True)
     table = body[body.index("| claim |"):]
     findings = evidence.findings.get(name, [])
     note = (f"\n{len(findings)} jobs ended in a finding about their setting (not evaluable; their claims are not "
@@ -103,7 +114,8 @@ def study_page(study: Study, checks: list[Check], evidence: Evidence) -> str:
             if findings else "")
     return (f"# Verdicts: {name}\n\nThe study: `{study.command}`. {_generated('`' + evidence.sources[name] + '`')} "
             f"Numbers: mean +- std over seeds of each seed's mean normalised cost (a fallen robot's cost counts as "
-            f"1).\n\n**{counts_line(checks)}.**\n{note}\n{table}")
+            f"1). The family of Holm's correction: this page's checks.\n\n**{counts_line(checks)}** (after Holm's "
+            f"correction: {counts_line_of(corrected(checks))}).\n{note}\n{table}")
 
 
 def _values_text(values, n_folders: str) -> str:
@@ -143,7 +155,7 @@ def paper_page(evidence: Evidence, checks: dict[str, list[Check]], registry: Cla
              "**Ours**: per configuration, the mean over seeds of each seed's mean normalised cost, the number of "
              f"seeds and the folders under `results/` its runs come from. {notes}Each study's verdicts on its own "
              "runs: `<study>/verdicts.md`.\n"]
-    everything, folders = [], {}
+    everything, folders, holms = [], {}, []
     claimed = paper_claims(checks, registry)
     for number, claim, chosen in claimed:
         everything += chosen
@@ -154,32 +166,91 @@ def paper_page(evidence: Evidence, checks: dict[str, list[Check]], registry: Cla
         source = sources[claim.source]
         if source.folders is not None and claim.source not in folders:
             folders[claim.source] = source.folders(evidence)
-        lines.append(f"Verdicts: {counts_line(chosen)}.\n")
-        lines.append("| robot | setting | task | claim tested | ours (per configuration) | test | verdict | folder |")
-        lines.append("|---|---|---|---|---|---|---|---|")
-        for check in chosen:
+        holm = corrected(chosen)
+        holms += holm
+        lines.append(f"Verdicts: {counts_line(chosen)} (after Holm's correction over this claim's "
+                     f"{len(chosen)} checks: {counts_line_of(holm)}).\n")
+        lines.append("| robot | setting | task | claim tested | ours (per configuration) | test | verdict | "
+                     f"Holm (family: this claim) | at seeds 0-{PLANNED_SEEDS - 1} | folder |")
+        lines.append("|---|---|---|---|---|---|---|---|---|---|")
+        for check, fixed in zip(chosen, holm):
             folder = source.folder_of(check)
             ours = ours_text(check, folders[claim.source]) if source.folders is not None else \
                 ours_text(check, folder=folder)
             if "goals reached" in check.ours:   # what follows the cost: the goals reached, and in how many steps
                 ours += check.ours[check.ours.index(";"):]
             lines.append(f"| {check.robot} | {check.setting} | {check.task} | {check.claim} | {ours} | "
-                         f"{check.detail or '-'} | **{check.verdict}** | {folder} |")
+                         f"{check.detail or '-'} | {verdict_text(check, fixed, bold=True)} | {fixed} | "
+                         f"{planned(check) or 'same seeds'} | {folder} |")
         if claim.note is not None and (note := claim.note(checks)):
             lines.append(note)
         lines.append("")
     unmeasurable = [c for c in registry.claims() if not c.source]
-    lines.append("## Claims not measured yet\n")
-    lines.append("| claim | where | verdict | the study it needs |")
+    lines.append("## Claims not measured yet, or not testable here\n")
+    lines.append("| claim | where | verdict | why; what it needs |")
     lines.append("|---|---|---|---|")
-    lines += [f"| {c.words} | {c.where} | not measured yet | {c.needs} |" for c in unmeasurable]
+    lines += [f"| {c.words} | {c.where} | {c.status} | {c.needs} |" for c in unmeasurable]
     counted = [(statement, found) for statement in registry.counted() if (found := statement.count(evidence))]
     if counted:
         lines.append("\n## Statements about the design, counted rather than tested\n")
         lines += [statement.words + "; ".join(found) + "." for statement, found in counted]
     unmeasured = len(unmeasurable) + sum(not chosen for *_, chosen in claimed)
-    lines.insert(4, f"**All claims tested: {counts_line(everything)}** (plus {unmeasured} not measured yet).\n")
+    lines += sensitivity(evidence, everything)
+    borderline = sum(is_borderline(c, h) for c, h in zip(everything, holms))
+    later = [(c, v) for c in everything if (v := planned(c)) is not None]
+    lines.insert(4, f"**All claims tested: {counts_line(everything)}** (plus {unmeasured} not measured yet or not "
+                    f"testable here). "
+                    f"**After Holm's correction within each claim** (the family: one numbered claim's checks): "
+                    f"{counts_line_of(holms)}. {borderline} verdicts are borderline. At the pre-planned "
+                    f"{PLANNED_SEEDS} seeds (seeds 0-{PLANNED_SEEDS - 1}; the {len(later)} checks with a side run on "
+                    f"more seeds, added where verdicts looked fragile: optional stopping), "
+                    f"{sum(c.verdict != v for c, v in later)} verdicts differ from the final ones.\n")
     return "\n".join(lines) + "\n"
+
+
+# --- how the tally depends on the thresholds -------------------------------------------------------------------------
+
+def noise(evidence: Evidence, task: str = "trajectory_tracking", walks: float = 0.1) -> list[float]:
+    """The seed-to-seed standard deviations (ddof 1) of the per-seed costs of every configuration (method, robot,
+    setting) on ``task`` with 3 or more seeds and a mean cost below ``walks`` (the methods that walk it)."""
+    runs = [r for found in evidence.runs.values() for r in found if r.task == task]
+    out = []
+    for method, robot, setting in sorted({(r.method, r.robot, r.setting) for r in runs}):
+        values = seed_costs(runs, method=method, robot=robot, setting=setting, task=task)
+        if len(values) >= 3 and values.mean() < walks:
+            out.append(float(values.std(ddof=1)))
+    return out
+
+
+def sensitivity(evidence: Evidence, checks: list[Check]) -> list[str]:
+    """The section of ``paper_check.md`` on how the tally of ``checks`` depends on the minimum effect, the margin and
+    the 0.01 floor, and on the multiplicity correction's family, with the measured noise the floor is set against."""
+    def row(name, verdicts):
+        return f"| {name} | " + " | ".join(str(sum(v == k for v in verdicts)) for k in stats.VERDICTS) + " |"
+
+    spread = noise(evidence)
+    lines = ["## How the tally depends on the thresholds\n",
+             "The same checks decided again with other thresholds (a comparison's own thresholds, where it states "
+             "them, kept), and with the multiplicity correction over other families.\n",
+             "| rule | " + " | ".join(stats.VERDICTS) + " |", "|---|---|---|---|---|",
+             row(f"as decided (min effect {stats.MIN_EFFECT_REL:.0%}, margin {stats.EQUIV_MARGIN_REL:.0%}, floor "
+                 f"{stats.MIN_EFFECT_ABS})", [c.verdict for c in checks]),
+             row("no floor (relative criteria only)", [redecided(c, min_effect_abs=0.0, margin_abs=0.0)
+                                                      for c in checks])]
+    lines += [row(f"min effect {rel:.0%}", [redecided(c, min_effect_rel=rel) for c in checks]) for rel in (0.05, 0.2)]
+    lines += [row(f"margin {rel:.0%}", [redecided(c, margin_rel=rel) for c in checks]) for rel in (0.1, 0.4)]
+    lines += [row("Holm over every check of the page (one family)", corrected(checks)),
+              row("Benjamini-Hochberg over every check of the page",
+                  corrected(checks, adjust=stats.benjamini_hochberg))]
+    if spread:
+        lines.append(f"\n**The floor against the noise.** The seed-to-seed standard deviation of the "
+                     f"trajectory-tracking cost of the {len(spread)} configurations that walk it (mean cost below "
+                     f"0.1, 3 or more seeds): median {np.median(spread):.4f}, largest {max(spread):.4f}. The floor "
+                     f"{stats.MIN_EFFECT_ABS} is "
+                     f"kept: it is at or above the largest of them, so a difference below it is within one seed's "
+                     f"spread of the noisiest configuration; without it (the row above) the saturated "
+                     f"trajectory-tracking costs are decided on differences smaller than that.")
+    return lines + [""]
 
 
 # --- fragile claims ------------------------------------------------------------------------------------------------
