@@ -88,6 +88,19 @@ def study_robots(names, problems: list[str]) -> list:
     return robots
 
 
+def method_problems(methods, variants) -> list[str]:
+    """A problem per method that is neither a recipe nor one of the study's ``variants``."""
+    from hierloco.pipeline.studies import resolve_method
+
+    problems = []
+    for method in methods:
+        try:
+            resolve_method(method, variants)
+        except ValueError as error:
+            problems.append(str(error))
+    return problems
+
+
 def seed_problems(seeds) -> list[str]:
     """A problem per seed that is not an integer >= 0, and one when there are none."""
     return [f"seed {s!r} is not an integer >= 0" for s in seeds if not (isinstance(s, int) and s >= 0)] + (
@@ -166,5 +179,6 @@ def end_study(results: Sequence[JobResult]) -> None:
         sys.exit(1)
 
 
-__all__ = ["PAPER_TASKS", "ConfigError", "EXIT_INTERRUPTED", "end_study", "main_tasks", "missing_markdown",
+__all__ = ["PAPER_TASKS", "ConfigError", "EXIT_INTERRUPTED", "end_study", "main_tasks", "method_problems",
+           "missing_markdown",
            "ray_address", "rows_of", "run_study", "seed_problems", "study_main", "study_robots", "write_tables"]

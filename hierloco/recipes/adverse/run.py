@@ -23,7 +23,9 @@ from hierloco.plots import plot_samples
 from hierloco.results import EPISODE_COLUMNS, csv_text, markdown_table
 from hierloco.pipeline import studies
 from hierloco.pipeline.config import ConfigError, SETTINGS, as_lists
-from hierloco.pipeline.study import end_study, main_tasks, run_study, seed_problems, study_main, study_robots
+from hierloco.pipeline.study import (
+    end_study, main_tasks, method_problems, run_study, seed_problems, study_main, study_robots,
+)
 
 def check(cfg) -> list:
     from hierloco.envs.robots.profiles import PROFILES
@@ -31,11 +33,7 @@ def check(cfg) -> list:
     as_lists(cfg, ("robots", "seeds", "methods", "samples", "sample_methods", "overrides", "profiles"))
     problems = []
     robots = study_robots(cfg.robots, problems)
-    for method in [*cfg.methods, *cfg.sample_methods]:
-        try:
-            studies.resolve_method(method, cfg.variants)
-        except ValueError as error:
-            problems.append(str(error))
+    problems += method_problems([*cfg.methods, *cfg.sample_methods], cfg.variants)
     for profile in cfg.profiles:
         if profile not in cfg.faults:
             problems.append(f"profile {profile!r} has no settings in faults")

@@ -23,7 +23,8 @@ from hierloco.io import write_text
 from hierloco.pipeline import studies
 from hierloco.pipeline.config import ConfigError, as_lists
 from hierloco.pipeline.study import (
-    end_study, main_tasks, rows_of, run_study, seed_problems, study_main, study_robots, write_tables,
+    end_study, main_tasks, method_problems, rows_of, run_study, seed_problems, study_main, study_robots,
+    write_tables,
 )
 from hierloco.recipes.compare import paper_check
 
@@ -32,11 +33,7 @@ def check(cfg) -> list:
     """The robots (resolved: names or YAML paths); raises one ConfigError naming every problem."""
     as_lists(cfg, ("methods", "robots", "seeds", "settings", "adverse_methods", "overrides"))
     problems = []
-    for method in cfg.methods:
-        try:
-            studies.resolve_method(method, cfg.variants)
-        except ValueError as error:
-            problems.append(str(error))
+    problems += method_problems(cfg.methods, cfg.variants)
     robots = study_robots(cfg.robots, problems)
     problems += [f"unknown setting {s!r} (normal, legs_disabled)" for s in cfg.settings
                  if s not in ("normal", "legs_disabled")]

@@ -24,7 +24,7 @@ from hierloco.io import write_text
 from hierloco.results import EPISODE_COLUMNS, csv_text, markdown_table
 from hierloco.pipeline import studies
 from hierloco.pipeline.config import ConfigError, as_lists
-from hierloco.pipeline.study import end_study, missing_markdown, run_study, study_main
+from hierloco.pipeline.study import end_study, method_problems, missing_markdown, run_study, study_main
 
 SETTINGS = ("normal", "hardware_unadapted", "hardware")
 LABELS = {"normal": "nominal robot", "hardware_unadapted": "perturbed, nominal model",
@@ -38,11 +38,7 @@ def check(cfg) -> tuple[list, dict]:
 
     as_lists(cfg, ("robots", "seeds", "methods", "overrides"))
     problems, robots = [], []
-    for method in cfg.methods:
-        try:
-            studies.resolve_method(method, cfg.variants)
-        except ValueError as error:
-            problems.append(str(error))
+    problems += method_problems(cfg.methods, cfg.variants)
     options = OmegaConf.to_container(cfg.hardware, resolve=True) if cfg.hardware is not None else {}
     for robot in cfg.robots:
         try:

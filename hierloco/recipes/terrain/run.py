@@ -32,7 +32,9 @@ from omegaconf import OmegaConf
 from hierloco.io import write_text
 from hierloco.pipeline import studies
 from hierloco.pipeline.config import ConfigError, as_lists, compose_recipe, override_value
-from hierloco.pipeline.study import end_study, missing_markdown, run_study, seed_problems, study_main, study_robots
+from hierloco.pipeline.study import (
+    end_study, method_problems, missing_markdown, run_study, seed_problems, study_main, study_robots,
+)
 from hierloco.recipes.compare.run import name_problems, renamed
 
 LABELS = ("base_task", "terrain", "level", "push_mps")
@@ -118,11 +120,7 @@ def check(cfg) -> list:
     as_lists(cfg, ("robots", "seeds", "methods", "terrains", "levels", "tasks", "overrides", "pushes.magnitudes_mps",
                    "pushes.tasks"))
     problems = []
-    for method in cfg.methods:
-        try:
-            studies.resolve_method(method, cfg.variants)
-        except ValueError as error:
-            problems.append(str(error))
+    problems += method_problems(cfg.methods, cfg.variants)
     robots = study_robots(cfg.robots, problems)
     problems += seed_problems(cfg.seeds)
     for method, seeds in (cfg.method_seeds or {}).items():
