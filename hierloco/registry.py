@@ -67,6 +67,7 @@ class Registry(Generic[T]):
         self.context = tuple(context)
         self.modules = tuple(modules)
         self._entries: dict[str, T] = {}
+        self._imported: dict[str, T] = {}  # import paths the user gave: other names of parts, not listed by names()
         self._entry_points_loaded = False
 
     # ------------------------------------------------------------------------------------------------ adding
@@ -90,6 +91,7 @@ class Registry(Generic[T]):
     def unregister(self, name: str) -> None:
         """Removes ``name`` (tests that register a part of their own remove it afterwards)."""
         self._entries.pop(name, None)
+        self._imported.pop(name, None)
 
     # ------------------------------------------------------------------------------------------------ reading
     def _load_entry_points(self) -> None:
@@ -113,13 +115,14 @@ class Registry(Generic[T]):
             self.register(entry_point.name)(target)
 
     def names(self) -> list[str]:
-        """Every registered name (built-in, registered in this process, or from installed packages), sorted."""
+        """Every registered name (built-in, registered in this process, or from installed packages), sorted; import
+        paths given in this process (:meth:`import_path`) are looked up too but not listed."""
         self._load_entry_points()
         return sorted(self._entries)
 
     def __contains__(self, name: object) -> bool:
         self._load_entry_points()
-        return name in self._entries
+        return name in self._entries or name in self._imported
 
     def __iter__(self):
         return iter(self.names())
@@ -130,6 +133,8 @@ class Registry(Generic[T]):
         self._load_entry_points()
         if name in self._entries:
             return self._entries[name]
+        if name in self._imported:
+            return self._imported[name]
         if is_import_path(name):
             raise ValueError(f"{self.kind} {name!r} is an import path that was not given on the command line or in "
                              f"the config: hierloco imports code only where you name it yourself ({self.kind}s: "
@@ -144,8 +149,8 @@ class Registry(Generic[T]):
         Raises ``ValueError`` in one line when it cannot be imported, or names something that is not a class (a
         subclass of ``base``, when given), before anything is registered."""
         self._load_entry_points()
-        if reference in self._entries:
-            target = self._entries[reference]
+        if reference in self._entries or reference in self._imported:
+            target = self._entries.get(reference, self._imported.get(reference))
         else:
             module, _, attribute = reference.partition(":")
             try:
@@ -158,11 +163,13 @@ class Registry(Generic[T]):
                 f"{'a function' if callable(target) else 'a ' + type(target).__name__} ({_qualname(target)})"
             wanted = f"a {base.__name__} subclass" if base is not None else "a class"
             raise ValueError(f"{self.kind} {reference!r} is {what}, not {wanted}")
-        if reference not in self._entries:
-            if self._entries.get(getattr(target, "registry_name", None)) is target:
-                self._entries[reference] = target  # its module registered it: the path is another name of it
-            else:
-                self.register(reference)(target)
+        if reference not in self._entries and reference not in self._imported:
+            if self._entries.get(getattr(target, "registry_name", None)) is not target:
+                try:
+                    target.registry_name = reference  # a part nobody registered: the path is its name
+                except (AttributeError, TypeError):
+                    pass
+            self._imported[reference] = target
         return target
 
     def options(self, name: str) -> dict[str, Any]:

@@ -54,7 +54,7 @@ def check_planner_options(name: str, section: Mapping[str, Any], *, action_space
     from hierloco.devices import PRECISIONS
     from hierloco.envs.world_model import CoMWorldModelEnv
 
-    known = {option for other in PLANNERS.names() for option in PLANNERS.options(other)}
+    known = {option for other in {*PLANNERS.names(), name} for option in PLANNERS.options(other)}
     problems = [f"planner has no option {key!r} (the planners' options: {', '.join(sorted(known))})"
                 for key in section if key not in known and key not in COMMON]
     own = PLANNERS.select(name, section)
