@@ -608,18 +608,53 @@ def ray_session(address: str | None = None):
             _remove_folder(temp_dir)
 
 
-def _remove_folder(path: str, patience_s: float = 10.0) -> None:
-    """Removes the folder this process made, again while the processes it stopped still write their last files
-    into it (a worker's log may recreate it): done once it stays gone for a second."""
+def _processes_naming(folder: str) -> list[int]:
+    """This user's live processes (not this one, not zombies) whose command line names ``folder``: the Ray
+    processes of a local instance started in it (every one is given its session folder). Empty where there is no
+    ``/proc``."""
+    found, me, uid = [], os.getpid(), os.getuid()
+    try:
+        entries = os.listdir("/proc")
+    except OSError:
+        return found
+    needle = folder.encode()
+    for name in entries:
+        if not name.isdigit() or int(name) == me:
+            continue
+        try:
+            if os.stat(f"/proc/{name}").st_uid != uid:
+                continue
+            with open(f"/proc/{name}/cmdline", "rb") as cmdline:
+                if needle not in cmdline.read():
+                    continue
+            with open(f"/proc/{name}/stat") as stat:
+                if stat.read().rpartition(") ")[2].split()[0] == "Z":
+                    continue
+        except OSError:  # gone meanwhile
+            continue
+        found.append(int(name))
+    return found
+
+
+def _remove_folder(path: str, patience_s: float = 15.0) -> None:
+    """Removes the folder this process made for its own Ray instance, after stopping every process still naming it:
+    a ``ray.init`` cut short by a signal leaves processes that ``ray.shutdown`` does not know (a runtime-env agent
+    its raylet was starting), and they write logs into the folder. Each round kills what names the folder (SIGKILL:
+    ``ray.shutdown`` already asked) and removes the folder; done once no process names it and it stays gone for a
+    second."""
     deadline = time.monotonic() + patience_s
-    gone_since = None
+    quiet_since = None
     while time.monotonic() < deadline:
-        if os.path.exists(path):
+        left = _processes_naming(path)
+        for pid in left:
+            with contextlib.suppress(OSError):
+                os.kill(pid, signal.SIGKILL)
+        if left or os.path.exists(path):
             shutil.rmtree(path, ignore_errors=True)
-            gone_since = None
-        elif gone_since is None:
-            gone_since = time.monotonic()
-        elif time.monotonic() - gone_since >= 1.0:
+            quiet_since = None
+        elif quiet_since is None:
+            quiet_since = time.monotonic()
+        elif time.monotonic() - quiet_since >= 1.0:
             return
         time.sleep(0.2)
 
