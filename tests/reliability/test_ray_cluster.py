@@ -86,6 +86,20 @@ def test_the_study_skeleton_checks_the_ray_address_before_loading_ray_or_torch()
     assert out.stdout.strip() == ""
 
 
+def test_every_study_refuses_a_dead_ray_address_before_loading_torch():
+    """Every registered study's script loads no torch, TorchRL or Ray as it is imported (what it needs of
+    them is imported where a table is judged), so a dead ``RAY_ADDRESS`` is one line in about a second."""
+    code = ("import importlib, sys\n"
+            "from hierloco.pipeline.methods import STUDIES\n"
+            "for name in STUDIES.names():\n"
+            "    importlib.import_module(STUDIES[name].package + '.' + STUDIES[name].script_name.removesuffix('.py'))\n"
+            "    heavy = [m for m in ('ray', 'torch', 'torchrl') if m in sys.modules]\n"
+            "    print(name, ','.join(heavy))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True)
+    lines = out.stdout.splitlines()
+    assert len(lines) >= 8 and all(line.split(" ")[1:] == [""] for line in lines), out.stdout
+
+
 def test_what_a_job_on_a_cluster_sends_back_lands_where_no_other_run_lies(tmp_path):
     """A node's run directory and log come back to the driver's path for the job; once there (or on storage both
     share) nothing is written twice; a run directory of another run at that path is left as it is, in one line."""

@@ -17,7 +17,6 @@ from pathlib import Path
 
 import numpy as np
 
-from hierloco.components.dynamics_data import TransitionData
 from hierloco.io import write_text
 from hierloco.plots import plot_samples
 from hierloco.results import EPISODE_COLUMNS, csv_text, markdown_table
@@ -176,6 +175,8 @@ def achievable_speeds(results) -> str:
             speeds = entry.get("achievable_speeds")
             data = Path(result.job.run_dir) / f"{name}.npz"
             if speeds is None and data.is_file():
+                from hierloco.components.dynamics_data import TransitionData  # torch: only for a rebuilt row
+
                 speeds = TransitionData.load(data).achievable_speeds()
             cells = " | ".join(f"{speeds[k]:.2f}" if speeds else "-"
                                for k in ("forward", "backward", "left", "right", "turn"))

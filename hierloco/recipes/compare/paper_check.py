@@ -22,7 +22,6 @@ from __future__ import annotations
 from hierloco import claims as claims_lib
 from hierloco import stats
 from hierloco.claims import NOT_MEASURED, TASKS, Check, decided, describe, part, seed_means
-from hierloco.envs.tasks import GoalReaching
 
 LEARNED = ("lib", "sac", "sac_sac")   # the learned baselines LAT is claimed to beat on every task
 MODEL_FREE = ("sac", "sac_sac")       # trained on half of the targets, claimed not to generalise to the others
@@ -146,6 +145,8 @@ def _generalisation(rows, robot: str) -> list[Check]:
                     == (method, robot, "normal", "goal_reaching")}
         if len(episodes) < 2:
             continue
+        from hierloco.envs.tasks import GoalReaching  # torch: only where a table is judged
+
         training = set(GoalReaching(num_goals=max(episodes) + 1).training_episodes)
         split = {name: seed_means(rows, method=method, robot=robot, setting="normal", task="goal_reaching",
                                   episodes=chosen)
