@@ -99,7 +99,7 @@ class JobResult:
 
 def resolve_method(name: str, variants) -> tuple[str, list[str]]:
     """A study's method: a method of the registry (:data:`hierloco.pipeline.methods.METHODS`), or a variant
-    ``{recipe: ..., overrides: [...]}`` (e.g. ``ik_plain``: the IK recipe with the paper's plain footstep law);
+    ``{recipe: ..., overrides: [...]}`` (e.g. ``ik_plain``: the IK recipe with the plain footstep law);
     returns the recipe and the variant's overrides."""
     variants = variants or {}
     if name in variants:

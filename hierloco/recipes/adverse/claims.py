@@ -22,7 +22,7 @@ SAMPLES = (200, 500, 1000, 2000)
 
 
 def adverse_checks(runs: list[Run], findings: list[dict]) -> list[Check]:
-    """The damage study: per robot, profile and fault, "LAT beats IK" (our integral law, and the paper's plain law)
+    """The damage study: per robot, profile and fault, "LAT beats IK" (our integral law, and the plain footstep law)
     on each task, and in the normal setting "LAT is close to IK"; faults in which a method's jobs ended in a finding
     (every random action fell) are not testable; and the dynamics re-learned after damage from few samples against
     10,000 (rear legs locked, own profile)."""

@@ -25,7 +25,7 @@ from hierloco.claims import NOT_MEASURED, TASKS, Check, decided, describe, part,
 
 LEARNED = ("lib", "sac", "sac_sac")   # the learned baselines LAT is claimed to beat on every task
 MODEL_FREE = ("sac", "sac_sac")       # trained on half of the targets, claimed not to generalise to the others
-IK_METHODS = ("ik", "ik_plain")       # IK with our footstep law, and with the paper's plain law
+IK_METHODS = ("ik", "ik_plain")       # IK with our footstep law, and with the plain footstep law
 # the paper's stated numbers, all A1 in simulation: (robot, setting, task, method) -> "mean +- std"; where each is
 # stated: Sec. IV-B with Fig. 7b (A1's baseline comparison), Sec. IV-C with Fig. 7d (A1, LAT and IK)
 PAPER = {("a1", "normal", "goal_reaching", "lat"): "0.34 +- 0.02",

@@ -1,7 +1,7 @@
 """Tune a baseline on its training targets (Li et al., RA-L 2021, Sec. IV-B: baselines see half of each task's
 targets), as jobs on Ray, so that the comparison runs each baseline at its best without looking at its test targets.
 
-    hierloco study tune                              # IK: integral vs the paper's plain footstep law
+    hierloco study tune                              # IK: integral vs the plain footstep law
     hierloco study tune target=sac seeds=[1]         # SAC: the paper's lr 1e-3 vs 3e-4
     hierloco study tune robots=[daisy] seeds=[0] 'candidates={a: {overrides: []}, b: {overrides: [...]}}'
 
