@@ -17,7 +17,10 @@ for a latent gait policy that reproduces them in simulation (:func:`hierloco.com
    joint damping 0.02 s x kp); then, unless a candidate already passes with a margin (``SCORE_CAP``), the rest of
    the servo grid around the two best gaits (:func:`servo_settings`: kp for a sag of 0.1 and 0.05 rad x joint
    damping of 0.01, 0.02 and 0.04 s x kp), and the body lowered around the best; then, only when nothing passes,
-   smaller command boxes.
+   smaller command boxes; then, for a robot whose file and description give some joints no torque limit (read by
+   the check with provisional ones, :func:`hierloco.envs.robots.check.robot_for_check`), the best candidate that
+   passes at each lower torque-limit level (:func:`torque_limit_levels`), the smallest that passes verified first:
+   the motors' peak torque the gait needs.
 2. **verification** of the best candidates, in order, while the budget lasts: the expert library exactly as the
    experts stage builds it, its tracking check, and a gait policy trained and checked in simulation
    (:func:`hierloco.components.gait_policy_fit.fit_gait_policy`, which adapts the training when the first fit falls
@@ -27,7 +30,8 @@ for a latent gait policy that reproduces them in simulation (:func:`hierloco.com
    is found.
 3. **what made the difference**: each change the found parameters make to the description's is undone alone, the
    others kept, and screened beside them (:func:`difference_candidates`): a change whose undoing fails the
-   screening is one the robot needs; one whose undoing passes with a lower score gave it margin.
+   screening is one the robot needs; one whose undoing passes with a lower score gave it margin. A torque limit the
+   description lacks is lowered to the next level instead: when that fails, the gait needs the limit found.
 
 Example:
     >>> from hierloco.envs.robots import get_robot
@@ -69,7 +73,12 @@ from hierloco.envs.robots import (
     get_robot,
     joint_qvel_indices,
 )
-from hierloco.envs.robots.check import SUGGESTED_SAG, standing_statics
+from hierloco.envs.robots.check import (
+    SUGGESTED_SAG,
+    TORQUE_LIMIT_FACTORS,
+    standing_statics,
+    torque_limit_level,
+)
 
 REPRODUCTION_TOLERANCE = 0.05  # m/s: a replay or a policy reproduces an expert within this (check_gait_policy)
 MIN_REPRODUCED_FRACTION = 0.8  # the gait-policy check's default bar (checks.min_reproduced_fraction)
@@ -97,6 +106,9 @@ class ExpertParameters:
         gait_period: s. swing_height: foot lift in m. standing_height: m, base above the floor standing.
         standing_pose: rad, one angle per joint. kp: N m / rad per joint. joint_damping: N m s / rad per joint.
         command_low, command_high: the command box ``(vx m/s, vy m/s, yaw_rate rad/s)``.
+        torque_limit: N m per joint, the motors' peak torque; ``None``: the robot's own (its description's or its
+            file's; for a robot with provisional limits, :attr:`RobotSpec.provisional_torque_joints`, the
+            provisional ones: its description gives none).
     """
 
     gait_period: float
@@ -107,11 +119,12 @@ class ExpertParameters:
     joint_damping: tuple[float, ...]
     command_low: tuple[float, float, float]
     command_high: tuple[float, float, float]
+    torque_limit: tuple[float, ...] | None = None
 
     @classmethod
     def of(cls, robot: RobotSpec) -> "ExpertParameters":
         """The parameters ``robot`` walks with now (gains and damping from its compiled model when its
-        description gives none)."""
+        description gives none; ``torque_limit`` ``None``, the robot's own)."""
         model = compile_model(robot)
         kp = robot.kp if robot.kp is not None else tuple(float(k) for k in model.actuator_gainprm[:, 0])
         damping = (robot.joint_damping if robot.joint_damping is not None else
@@ -122,17 +135,24 @@ class ExpertParameters:
                    command_high=tuple(robot.command_high))
 
     def apply(self, robot: RobotSpec) -> RobotSpec:
-        """``robot`` with these parameters (a fall below half the new standing height, unless it gives its own)."""
+        """``robot`` with these parameters (a fall below half the new standing height, unless it gives its own;
+        with a ``torque_limit``, that limit and none of it provisional)."""
         min_height = robot.min_height if robot.min_height < self.standing_height else self.standing_height / 2
+        torque = {} if self.torque_limit is None else {"torque_limit": self.torque_limit,
+                                                       "provisional_torque_joints": ()}
         return robot.replace(gait_period=self.gait_period, swing_height=self.swing_height,
                              standing_height=self.standing_height, standing_pose=self.standing_pose, kp=self.kp,
                              joint_damping=self.joint_damping, command_low=self.command_low,
-                             command_high=self.command_high, min_height=min_height)
+                             command_high=self.command_high, min_height=min_height, **torque)
 
     def changed(self, other: "ExpertParameters") -> list[str]:
         """The names of the parameters that differ from ``other``'s."""
         names = []
         for name in self.__dataclass_fields__:
+            if getattr(self, name) is None or getattr(other, name) is None:  # torque_limit: the robot's own
+                if (getattr(self, name) is None) != (getattr(other, name) is None):
+                    names.append(name)
+                continue
             a, b = np.asarray(getattr(self, name), float), np.asarray(getattr(other, name), float)
             if a.shape != b.shape or not np.allclose(a, b, rtol=1e-6, atol=1e-9):
                 names.append(name)
@@ -148,7 +168,9 @@ class ExpertParameters:
         lines = []
         for name in names:
             value = getattr(self, name)
-            if name in ("standing_pose", "kp", "joint_damping"):
+            if value is None:
+                continue
+            if name in ("standing_pose", "kp", "joint_damping", "torque_limit"):
                 lines.append(f"{name}: {per_joint_yaml(robot, value, digits=4 if name == 'standing_pose' else 3)}")
             elif name in ("command_low", "command_high"):
                 lines.append(f"{name}: [{', '.join(_number(v, 3) for v in value)}]")
@@ -243,16 +265,19 @@ class ServoSetting:
 
     Attributes:
         kp: N m / rad per joint. joint_damping: N m s / rad per joint. label: what it changes (empty for the
-            description's own).
+            description's own). torque_limit: N m per joint (``None``: the robot's own, searched only where its
+            limits are provisional).
     """
 
     kp: tuple[float, ...]
     joint_damping: tuple[float, ...]
     label: str
+    torque_limit: tuple[float, ...] | None = None
 
     def on(self, base: Candidate) -> Candidate:
         """``base`` with these servos."""
-        return Candidate(replace(base.params, kp=self.kp, joint_damping=self.joint_damping), base.label + self.label)
+        return Candidate(replace(base.params, kp=self.kp, joint_damping=self.joint_damping,
+                                 torque_limit=self.torque_limit), base.label + self.label)
 
 
 def _round_significant(value: float, digits: int = 2) -> float:
@@ -268,9 +293,11 @@ def servo_settings(robot: RobotSpec, params: ExpertParameters) -> list[ServoSett
       load (static torque / kp, :func:`hierloco.envs.robots.check.standing_statics`) sags ``SAG_TARGETS`` rad
       (two significant digits; capped so that a ``SATURATION_ANGLE`` error saturates no motor; a level less than
       ``MIN_KP_STEP`` above the description's is the description's);
-    - joint damping: the description's, and ``DAMPING_TIMES`` s x kp.
-
-    The torque limits are the file's (a robot without them is refused when it is read).
+    - joint damping: the description's, and ``DAMPING_TIMES`` s x kp;
+    - torque limits: the robot's own, unless some are provisional (the file and the description give them none:
+      :func:`hierloco.envs.robots.check.robot_for_check`). Then the grid is kp x joint damping at ``params``'
+      limit (the provisional one to start with), followed by the same at each lower level of
+      :func:`torque_limit_levels`, highest first (kp levels and their cap computed at the first limit).
 
     Example:
         >>> from hierloco.envs.robots import get_robot
@@ -279,6 +306,8 @@ def servo_settings(robot: RobotSpec, params: ExpertParameters) -> list[ServoSett
         >>> settings[0].label, settings[1].label
         ('', ', joint_damping 2 (0.02 s x kp)')
     """
+    levels = torque_limit_levels(robot)
+    start = params.torque_limit if params.torque_limit is not None else (robot.torque_limit if levels else None)
     tuned = params.apply(robot)
     model = compile_model(tuned)
     statics = standing_statics(tuned, model)
@@ -306,12 +335,48 @@ def servo_settings(robot: RobotSpec, params: ExpertParameters) -> list[ServoSett
             key = (tuple(np.round(kp, 6)), tuple(np.round(damping, 6)))
             if key not in settings:
                 settings[key] = ServoSetting(tuple(float(k) for k in kp), tuple(float(d) for d in damping),
-                                             kp_label + damping_label)
+                                             kp_label + damping_label, start)
             if rule is None and target == rule_kp and time_ == RULE_DAMPING_TIME:
                 rule = settings[key]
     ordered = list(settings.values())
     ordered.remove(rule)
-    return [ordered[0], rule, *ordered[1:]]
+    ordered = [ordered[0], rule, *ordered[1:]]
+    lower = [(limit, factor) for limit, factor in reversed(levels) if _below(limit, start)]
+    return ordered + [replace(setting, torque_limit=limit, label=setting.label + torque_limit_label(robot, limit, factor))
+                      for limit, factor in lower for setting in ordered]
+
+
+def torque_limit_levels(robot: RobotSpec) -> list[tuple[tuple[float, ...], float]]:
+    """The torque-limit levels searched for a robot with provisional limits, lowest first: ``(N m per joint,
+    factor)``, the provisional joints at ``factor`` x the largest static torque standing for each of
+    ``TORQUE_LIMIT_FACTORS`` (:func:`hierloco.envs.robots.check.torque_limit_level`), the others at their own.
+    Empty for a robot whose limits are all given.
+
+    Example:
+        >>> from hierloco.envs.robots import A1
+        >>> torque_limit_levels(A1)  # its file gives every joint a limit
+        []
+        >>> robot = A1.replace(provisional_torque_joints=A1.joint_names)  # as if it gave none
+        >>> [(limit[0], factor) for limit, factor in torque_limit_levels(robot)]
+        [(14.0, 1.5), (19.0, 2.0), (29.0, 3.0), (38.0, 4.0), (57.0, 6.0)]
+    """
+    if not robot.provisional_torque_joints:
+        return []
+    return [(torque_limit_level(robot, factor), float(factor)) for factor in TORQUE_LIMIT_FACTORS]
+
+
+def torque_limit_label(robot: RobotSpec, limit: Sequence[float], factor: float | None = None) -> str:
+    """``", torque_limit 36 N m (2 x the torque standing)"``: a candidate's label for a torque-limit level."""
+    times = f" ({factor:g} x the torque standing)" if factor is not None else ""
+    return f", torque_limit {per_joint_text(robot, limit)} N m{times}"
+
+
+def _below(limit: Sequence[float] | None, other: Sequence[float] | None) -> bool:
+    """Whether the torque limits ``limit`` are lower than ``other``'s (at some joint, and nowhere higher)."""
+    if limit is None or other is None:
+        return False
+    a, b = np.asarray(limit, float), np.asarray(other, float)
+    return bool(np.all(a <= b * (1 + 1e-9)) and np.any(a < b * (1 - 1e-9)))
 
 
 def per_joint_text(robot: RobotSpec, values: Sequence[float]) -> str:
@@ -591,6 +656,8 @@ class Difference:
         name: the parameter (``standing_height`` stands for the height and its pose, ``command box`` for both
             edges). before, after: its value in the description and in what was found, as text.
         undone: the screening of the parameters found with this change undone. found: theirs, in the same batch.
+        how: how it was undone, for the line (a torque limit the description lacks cannot be: the next lower
+            level is screened instead, so that "needed" says the gait needs that peak torque).
     """
 
     name: str
@@ -598,6 +665,7 @@ class Difference:
     after: str
     undone: CandidateScore
     found: CandidateScore
+    how: str = "undone"
 
     @property
     def needed(self) -> bool:
@@ -612,21 +680,28 @@ class Difference:
     def describe(self) -> str:
         if self.needed:
             verdict = "it made the difference"
+            if self.name == "torque_limit":
+                verdict += (": the motors' peak torque the gait needs (none in the file nor the description; check "
+                            "it against your motors)")
         elif self.margin:
             verdict = (f"passes without it with less margin (score {self.undone.score:.2f}, with it "
                        f"{min(self.found.score, SCORE_CAP):.2f}{'+' if self.found.score > SCORE_CAP else ''})")
         else:
             verdict = "not needed alone"
-        return f"{self.name} {self.before} -> {self.after}: undone, {self.undone.describe().split(': ', 1)[-1]}; " \
-               f"{verdict}"
+        return f"{self.name} {self.before} -> {self.after}: {self.how}, " \
+               f"{self.undone.describe().split(': ', 1)[-1]}; {verdict}"
 
 
 DIFFERENCE_GROUPS = (("gait_period", ("gait_period",)), ("swing_height", ("swing_height",)),
                      ("standing_height", ("standing_height", "standing_pose")), ("kp", ("kp",)),
-                     ("joint_damping", ("joint_damping",)), ("command box", ("command_low", "command_high")))
+                     ("joint_damping", ("joint_damping",)), ("command box", ("command_low", "command_high")),
+                     ("torque_limit", ("torque_limit",)))
 
 
 def _value_text(robot: RobotSpec, params: ExpertParameters, names: Sequence[str]) -> str:
+    if names[0] == "torque_limit":
+        limit = params.torque_limit
+        return "none" if limit is None else f"{per_joint_text(robot, limit)} N m"
     if names[0] in ("kp", "joint_damping"):
         return per_joint_text(robot, getattr(params, names[0]))
     if names[0] == "command_low":
@@ -637,14 +712,31 @@ def _value_text(robot: RobotSpec, params: ExpertParameters, names: Sequence[str]
     return _number(getattr(params, names[0]), 4) + unit
 
 
+def _undone_text(robot: RobotSpec, name: str, candidate: Candidate) -> str:
+    if name == "torque_limit":
+        return f"at the next lower level, {per_joint_text(robot, candidate.params.torque_limit)} N m"
+    return "undone"
+
+
 def difference_candidates(robot: RobotSpec, found: ExpertParameters, reference: ExpertParameters
                           ) -> list[tuple[str, str, str, Candidate]]:
     """For each change ``found`` makes to ``reference`` (``DIFFERENCE_GROUPS``), ``(name, before, after,
-    candidate)``: ``found`` with that change alone undone."""
+    candidate)``: ``found`` with that change alone undone; a torque limit the description lacks (its provisional
+    limits) is lowered instead to the next level of :func:`torque_limit_levels` (below the lowest, 1 x the torque
+    standing: a motor that only just holds the robot up)."""
     changed = set(found.changed(reference))
     out = []
     for name, names in DIFFERENCE_GROUPS:
         if not changed & set(names):
+            continue
+        if name == "torque_limit":
+            lower = [limit for limit, _ in torque_limit_levels(robot) if _below(limit, found.torque_limit)]
+            if not lower and robot.provisional_torque_joints:
+                lower = [level for level in [torque_limit_level(robot, 1.0)] if _below(level, found.torque_limit)]
+            if not lower or reference.torque_limit is not None:
+                continue
+            out.append((name, _value_text(robot, reference, names), _value_text(robot, found, names),
+                        Candidate(replace(found, torque_limit=lower[-1]), f"{name} lowered")))
             continue
         undone = replace(found, **{n: getattr(reference, n) for n in names})
         out.append((name, _value_text(robot, reference, names), _value_text(robot, found, names),
@@ -725,9 +817,12 @@ class TuningResult:
         from hierloco.envs.robots import robot_fingerprint
 
         params = self.params
+        parameters = asdict(params) if params is not None else None
+        if parameters is not None and parameters["torque_limit"] is None:
+            del parameters["torque_limit"]  # the robot's own: as before torque limits were searched
         return {
             "found": self.found, "seconds": round(self.seconds, 1),
-            "parameters": asdict(params) if params is not None else None,
+            "parameters": parameters,
             "changed": params.changed(self.reference) if params is not None else [],
             "yaml": params.yaml_lines(self.robot, only=params.changed(self.reference)) if params is not None else [],
             "tuned_fingerprint": robot_fingerprint(self.tuned_robot()),
@@ -774,7 +869,8 @@ def tune_expert_parameters(
         robot: a registered name, a YAML path or a :class:`RobotSpec`.
         budget_seconds: s of wall-clock; no stage or verification starts after it, nor one that would not end
             within it (the one running finishes: its gait policy gets one longer fit whatever the budget, then
-            adapts further only within it).
+            adapts further only within it). The torque-limit screening of a robot with provisional limits and
+            the screening of what made the difference run whatever the budget (one batch each).
         num_experts, settle_time: the expert library verified (the experts stage's ``num_experts``,
             ``settle_time``; default: the small preset's).
         screening_settle_time: s of closed-loop walking before each screened expert is recorded.
@@ -788,6 +884,10 @@ def tune_expert_parameters(
             of at least ``MIN_GAIT_PERIOD`` s, the description's foot lift and ``SWING_FRACTIONS`` of the hips'
             height).
         log: called with a line per step (progress for a terminal).
+
+    ``robot`` may have provisional torque limits (:attr:`RobotSpec.provisional_torque_joints`, as
+    :func:`hierloco.envs.robots.check.robot_for_check` reads a file without them): the search then also finds the
+    smallest torque limit that walks (see the module docstring), a parameter of what it found.
 
     Returns:
         a :class:`TuningResult`.
@@ -831,7 +931,10 @@ def tune_expert_parameters(
                 bases.append(next(g for g in gaits if _gait_key(g.params) == key))
             if len(bases) == 2:
                 break
-        stage2 = [s.on(base) for base in bases for s in servo_settings(robot, base.params)[2:]]
+        stage2 = []
+        for base in bases:  # at the first torque limit (the robot's own, or the provisional one)
+            grid = servo_settings(robot, base.params)
+            stage2 += [s.on(base) for s in grid[2:] if s.torque_limit == grid[0].torque_limit]
         if stage2:
             run_stage("servo gains x joint damping", stage2)
     # 3. the body lowered around the best, likewise
@@ -845,7 +948,21 @@ def tune_expert_parameters(
         tops = [s for s in rank(everything(), reference) if s.num_commands][:3]
         if tops:
             run_stage("smaller command boxes", [c for s in tops for c in box_candidates(s.candidate)])
+    # 5. for provisional torque limits, the best candidate at each lower level: the smallest that passes first
+    lowest = []
+    levels = torque_limit_levels(robot)
+    tops = [s for s in rank(everything(), reference) if s.passes][:1]
+    if levels and tops:  # like what made the difference, whatever the budget: the limit is a motor requirement
+        top = tops[0].candidate
+        lower = [Candidate(replace(top.params, torque_limit=limit), top.label + torque_limit_label(robot, limit, f))
+                 for limit, f in levels if _below(limit, top.params.torque_limit)]
+        if lower:
+            scores = run_stage("torque limit", lower)
+            lowest = [s for s in scores if s.passes]  # lowest limit first
+            log(f"    smallest torque limit that passes: "
+                f"{per_joint_text(robot, (lowest[0] if lowest else tops[0]).candidate.params.torque_limit)} N m")
     ranked = rank(everything(), reference)
+    ranked = lowest + [s for s in ranked if not any(s is t for t in lowest)]
     best = ranked[0] if ranked and ranked[0].num_commands else None
     verifications: list[Verification] = []
     if verify and best is not None:
@@ -869,8 +986,9 @@ def tune_expert_parameters(
             tic = time.perf_counter()
             found_score, *scores = screen_candidates(
                 robot, [Candidate(result.params, "found"), *(c for *_, c in undone)], **screen)
-            result.differences = [Difference(name, before, after, score, found_score)
-                                  for (name, before, after, _), score in zip(undone, scores)]
+            result.differences = [Difference(name, before, after, score, found_score,
+                                             how=_undone_text(robot, name, candidate))
+                                  for (name, before, after, candidate), score in zip(undone, scores)]
             log(f"  what made the difference: {len(undone)} change{'s' if len(undone) > 1 else ''} undone one at a "
                 f"time, {sum(d.needed for d in result.differences)} needed ({time.perf_counter() - tic:.0f} s)")
     else:
@@ -954,4 +1072,5 @@ def _limits(best: CandidateScore | None, verifications: list[Verification]) -> l
 __all__ = ["Candidate", "CandidateScore", "DIFFERENCE_GROUPS", "Difference", "ExpertParameters", "ServoSetting",
            "TuningResult", "Verification", "box_candidates", "difference_candidates", "gait_candidates",
            "lowered_posture", "per_joint_text", "per_joint_yaml", "posture_candidates", "rank", "screen_candidates",
-           "screening_commands", "servo_settings", "tune_expert_parameters", "verify_candidate"]
+           "screening_commands", "servo_settings", "torque_limit_label", "torque_limit_levels",
+           "tune_expert_parameters", "verify_candidate"]

@@ -142,6 +142,11 @@ class RobotSpec:
         kp: position gain per joint in N m / rad, used when the model drives its joints with torque motors
             (and for the actuators hierloco builds itself).
         torque_limit: actuator torque limit per joint in N m (``None`` keeps the model's own).
+        provisional_torque_joints: the leg joints whose ``torque_limit`` is provisional: neither the description
+            nor the MJCF file gives them one, and the robot check
+            (:func:`hierloco.envs.robots.check.robot_for_check`) set a starting value from the standing load for
+            its search to find the smallest that walks (``docs/robots.md``). Empty for every robot loaded as
+            described.
         joint_damping: damping per joint in N m s / rad (``None`` keeps the model's own).
         foot_friction: sliding friction of the feet's contacts (``None`` keeps the model's own).
         mass_scale: every body's mass and inertia times this (a payload, heavier parts than modelled).
@@ -183,6 +188,7 @@ class RobotSpec:
     mass_scale: float = 1.0
     servo_latency: float = 0.0
     com_noise: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    provisional_torque_joints: tuple[str, ...] = ()
     description: str = field(default="", compare=False)
     source: str = field(default=PYTHON_SOURCE, compare=False)
 
@@ -210,6 +216,14 @@ class RobotSpec:
                 if not (_finite(value) and value > 0):
                     raise ValueError(f"{where}: {name} of joint {joint!r} must be a finite positive number, "
                                      f"got {value!r}")
+        object.__setattr__(self, "provisional_torque_joints", tuple(self.provisional_torque_joints))
+        if self.provisional_torque_joints:
+            unknown = [j for j in self.provisional_torque_joints if j not in joints]
+            if unknown:
+                raise ValueError(f"{where}: provisional_torque_joints: "
+                                 f"{missing_name_message('joint', unknown[0], joints)}")
+            if self.torque_limit is None:
+                raise ValueError(f"{where}: provisional_torque_joints needs the provisional values in torque_limit")
         self._check_gait_groups(where)
         for name in ("command_low", "command_high"):
             values = getattr(self, name)
@@ -483,7 +497,8 @@ def actuation_problem(spec: mujoco.MjSpec, joint_names: Sequence[str], *, kp_giv
     """Why the joints ``joint_names`` of the MJCF ``spec`` cannot become position servos as described, naming the
     robot description keys that would fix it, or ``None``: a joint with neither a position servo in the file nor
     ``kp`` given has no gain; one whose actuator sets no torque range (or that no actuator drives) and no
-    ``torque_limit`` given would get a servo of unlimited torque, which no motor has (``docs/robots.md``)."""
+    ``torque_limit`` given would get a servo of unlimited torque, which no motor has (``docs/robots.md``); the
+    message then says that the robot check proposes one (:func:`hierloco.envs.robots.check.robot_for_check`)."""
     found = file_actuators(spec, joint_names)
     none = (None, 0.0, None)
     no_gain = set() if kp_given else {j for j in joint_names if found.get(j, none)[0] is None}
@@ -500,9 +515,11 @@ def actuation_problem(spec: mujoco.MjSpec, joint_names: Sequence[str], *, kp_giv
                          if short)
     keys = " and ".join(key for key, short in (("kp (N m / rad)", no_gain),
                                                ("torque_limit (N m, the motors' peak torque)", no_limit)) if short)
+    proposes = (f"; {'once kp is given, ' if no_gain else ''}hierloco-robot-check proposes a torque_limit for this "
+                "file (the smallest peak torque its gait needs, to check against the motors)" if no_limit else "")
     return (f"{len(names)} of its {len(joint_names)} leg joints ({listed}) have {lacks}; give {keys} in the robot "
             "description (one number, one leg's values, one per joint, or a mapping leg -> values): hierloco never "
-            "makes a servo without a gain or a torque limit")
+            f"makes a servo without a gain or a torque limit{proposes}")
 
 
 def _set_actuators(spec: mujoco.MjSpec, robot: RobotSpec) -> None:
@@ -736,7 +753,8 @@ FINGERPRINT_VERSION = b"hierloco robot fingerprint 1"
 _NOT_FINGERPRINTED = ("build_spec", "source")
 # fields added after fingerprint 1: fingerprinted only when they differ from their default, so that every robot
 # described before keeps its fingerprint (and its cached runs)
-_FINGERPRINTED_WHEN_SET = {"mass_scale": 1.0, "servo_latency": 0.0, "com_noise": (0.0, 0.0, 0.0)}
+_FINGERPRINTED_WHEN_SET = {"mass_scale": 1.0, "servo_latency": 0.0, "com_noise": (0.0, 0.0, 0.0),
+                           "provisional_torque_joints": ()}
 
 
 def robot_fingerprint(robot: RobotSpec) -> str:

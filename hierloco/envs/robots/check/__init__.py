@@ -14,7 +14,10 @@ Two parts:
   reproduces them (:func:`hierloco.components.expert_tuning.tune_expert_parameters`), and prints the verified
   per-axis tracking table and the gait policy's reproduction, which change made the difference, the parameters
   found as YAML lines to paste into the robot's file and any recipe overrides as lines to paste on its command
-  line. Exit status 0 when found, 2 otherwise (and for bad input: one ``error: ...`` line).
+  line. Exit status 0 when found, 2 otherwise (and for bad input: one ``error: ...`` line). A robot whose file and
+  description give some leg joints no torque limit, which loading refuses, is read with provisional limits
+  (:func:`robot_for_check`), and the search finds the smallest ``torque_limit`` that walks: the motors' peak torque
+  the gait needs.
 
 Example:
     >>> from hierloco.envs.robots import get_robot
@@ -50,6 +53,16 @@ MAX_STATIC_TORQUE = 0.75  # static torque holding the robot on its stance legs, 
 MAX_STATIC_SAG = 0.25  # rad: a servo holding that torque is off its target by torque / kp, at most this
 SUGGESTED_SAG = 0.1  # rad: the sag of the servos that walk (docs/robots.md, choosing kp): kp ~ static torque / this
 LIMIT_MARGIN = 1e-6  # rad
+# torque_limit levels searched for joints the file and the description give none, as multiples of the robot's largest
+# static torque standing (N m, standing_statics; one level for every such joint: a joint whose foot stands straight
+# under it holds nothing standing, quadruped20's thigh 0 N m, yet walking loads it). 1.5 just clears the
+# description check (MAX_STATIC_TORQUE: the limit at least 1.33 x the static torque); the motors of the robots here
+# that walk are 1.5 to 3.7 x it at their joints (A1 3.5; quadruped9 2.8 and 3.7; quadruped20 1.9 and 2.4; quadruped40
+# 1.5 and 2.2; quadruped50 1.6 and 2.6; hexapod10 1.5 and 2.3; Daisy 0.9 to 1.9, its hips hold little)
+TORQUE_LIMIT_FACTORS = (1.5, 2.0, 3.0, 4.0, 6.0)
+# the search starts from the largest: such a motor does not limit the gait it looks for (a servo with kp for a
+# 0.05 rad sag, the stiffest searched, saturates only past a 0.3 rad error)
+PROVISIONAL_TORQUE_FACTOR = TORQUE_LIMIT_FACTORS[-1]
 
 
 @dataclass(frozen=True)
@@ -140,6 +153,108 @@ def standing_statics(robot: RobotSpec, model: mujoco.MjModel | None = None) -> S
     derived = float(robot.standing_height) - min(bottoms)
     return StandingStatics(robot=robot.name, mass=mass, standing_height=float(robot.standing_height),
                            feet_on_floor_height=derived, stance_legs=stance, legs=tuple(legs))
+
+
+def largest_static_torque(robot: RobotSpec) -> tuple[float, str]:
+    """``(N m, joint)``: the largest static torque of :func:`standing_statics`, and the joint that holds it."""
+    statics = standing_statics(robot)
+    torque, joint = max((t, name) for leg, spec in zip(statics.legs, robot.legs)
+                        for t, name in zip(leg.static_torque, spec.joints))
+    return float(torque), joint
+
+
+def torque_limit_level(robot: RobotSpec, factor: float) -> tuple[float, ...]:
+    """The torque limits (N m per joint) of ``robot`` with its ``provisional_torque_joints`` at ``factor`` x its
+    largest static torque standing (two significant digits), the other joints at their own limits.
+
+    Example:
+        >>> from hierloco.envs.robots import A1
+        >>> largest_static_torque(A1)  # doctest: +ELLIPSIS
+        (9.56..., 'RR_knee')
+        >>> torque_limit_level(A1.replace(provisional_torque_joints=("FR_knee",)), 2.0)[:3]
+        (33.5, 33.5, 19.0)
+    """
+    torque, _ = largest_static_torque(robot)
+    level = float(f"{factor * torque:.2g}")
+    provisional = set(robot.provisional_torque_joints)
+    return tuple(level if joint in provisional else float(limit)
+                 for joint, limit in zip(robot.joint_names, robot.torque_limit))
+
+
+def robot_for_check(reference) -> RobotSpec:
+    """The robot as the check reads it: :func:`hierloco.envs.robots.get_robot`'s, except a YAML robot that is
+    refused only because its file and description give some leg joints no torque limit. That one is read with a
+    provisional limit for those joints (``PROVISIONAL_TORQUE_FACTOR`` x the largest static torque standing, two
+    significant digits; the file's own limits elsewhere), which it lists in
+    :attr:`~hierloco.envs.robots.RobotSpec.provisional_torque_joints`: the search
+    (:func:`hierloco.components.expert_tuning.tune_expert_parameters`) then looks for the smallest limit that
+    walks, to be pasted as ``torque_limit``. Anything else is refused as by ``get_robot``.
+
+    Example:
+        >>> robot_for_check("a1").provisional_torque_joints  # a robot with limits: get_robot's
+        ()
+        >>> robot = robot_for_check("tests/fixtures/quadruped20_nolimit/quadruped20_nolimit.yaml")  # doctest: +SKIP
+        >>> robot.torque_limit[:3], len(robot.provisional_torque_joints)  # doctest: +SKIP
+        ((110.0, 110.0, 110.0), 12)
+    """
+    from hierloco.envs.robots import get_robot
+
+    try:
+        return get_robot(reference)
+    except ValueError:
+        robot = _with_provisional_torque_limits(reference)
+        if robot is None:
+            raise
+        return robot
+
+
+def _with_provisional_torque_limits(reference) -> RobotSpec | None:
+    """:func:`robot_for_check`'s robot, or ``None`` when ``reference`` is refused for another reason."""
+    import os
+    from pathlib import Path
+
+    from hierloco.envs.robots.mjcf import robot_from_mjcf
+    from hierloco.envs.robots.spec import YAML_SOURCE_PREFIX, actuation_problem, file_actuators
+    from hierloco.envs.robots.yaml_robot import is_robot_file, read_robot_yaml
+
+    if not isinstance(reference, (str, os.PathLike)) or not is_robot_file(reference):
+        return None
+    path = Path(reference).absolute()
+    try:
+        kwargs, mjcf = read_robot_yaml(path)
+        if "torque_limit" in kwargs:
+            return None
+        probe = mujoco.MjSpec.from_string(mjcf.read_text())
+        joints = [joint for leg in kwargs["legs"].values() for joint in leg]
+        if actuation_problem(probe, joints, kp_given="kp" in kwargs, torque_limit_given=True) is not None:
+            return None  # a missing gain stays a refusal
+        found = file_actuators(probe, joints)
+        missing = tuple(j for j in joints if found.get(j, (None, 0.0, None))[2] is None)
+        if not missing:
+            return None
+        kwargs.setdefault("description", f"{kwargs['name']} ({path.name})")
+        placeholder = [found[j][2] if j not in missing else 1.0 for j in joints]  # N m: statics need none
+        robot = robot_from_mjcf(mjcf, source=f"{YAML_SOURCE_PREFIX}{path}", torque_limit=placeholder, **kwargs)
+        robot = robot.replace(provisional_torque_joints=missing, source=robot.source)
+        if not largest_static_torque(robot)[0] > 0:
+            return None
+        return robot.replace(torque_limit=torque_limit_level(robot, PROVISIONAL_TORQUE_FACTOR), source=robot.source)
+    except (ValueError, OSError, KeyError, TypeError):
+        return None
+
+
+def provisional_torque_text(robot: RobotSpec) -> str | None:
+    """One line on the provisional torque limits of ``robot`` (``None`` when it has none)."""
+    joints = robot.provisional_torque_joints
+    if not joints:
+        return None
+    torque, joint = largest_static_torque(robot)
+    limit = max(robot.torque_limit[robot.joint_names.index(j)] for j in joints)
+    return (f"torque limits: the file and the description give {len(joints)} of {robot.num_joints} leg joints none; "
+            f"the search starts them at {limit:g} N m ({PROVISIONAL_TORQUE_FACTOR:g} x the largest torque standing, "
+            f"{torque:.1f} N m at joint {joint!r}) and looks for the smallest of "
+            f"{', '.join(f'{f:g}' for f in TORQUE_LIMIT_FACTORS)} x that torque that walks: the motors' peak torque "
+            "the gait needs")
 
 
 def _legs(names) -> str:
@@ -310,13 +425,16 @@ def description_summary(robot: RobotSpec) -> str:
     sag, torque = max(sags, default=(0.0, 0.0))
     hint = (f"; servos that walk sag about {SUGGESTED_SAG} rad, kp {torque / SUGGESTED_SAG:.0f} N m/rad at that "
             "joint (docs/robots.md: choosing kp)" if sag > 1.5 * SUGGESTED_SAG else "")
+    limit = " provisional" if robot.provisional_torque_joints else ""
     return (f"standing pose inside the joint limits; feet {min(leg.foot_drop for leg in statics.legs):.3f} m or more "
             f"below the hips ({drop:.0%} of the reach, need {MIN_FOOT_DROP:.0%}) and on the floor; holding "
-            f"{statics.mass:.1f} kg on {statics.stance_legs} stance legs takes at most {ratio:.0%} of a joint's torque "
-            f"limit (need {MAX_STATIC_TORQUE:.0%} or less) and the servos sag {sag:.2f} rad at most (need "
+            f"{statics.mass:.1f} kg on {statics.stance_legs} stance legs takes at most {ratio:.0%} of a joint's{limit} "
+            f"torque limit (need {MAX_STATIC_TORQUE:.0%} or less) and the servos sag {sag:.2f} rad at most (need "
             f"{MAX_STATIC_SAG} or less){hint}")
 
 
 __all__ = ["EXIT_FOUND", "EXIT_NOT_FOUND", "FLOOR_TOLERANCE", "LegStatics", "MAX_STATIC_SAG", "MAX_STATIC_TORQUE",
-           "MIN_FOOT_DROP", "RobotDescriptionError", "SUGGESTED_SAG", "StandingStatics", "description_problems",
-           "description_summary", "standing_statics", "suggested_standing_pose"]
+           "MIN_FOOT_DROP", "PROVISIONAL_TORQUE_FACTOR", "RobotDescriptionError", "SUGGESTED_SAG", "StandingStatics",
+           "TORQUE_LIMIT_FACTORS", "description_problems", "description_summary", "largest_static_torque",
+           "provisional_torque_text", "robot_for_check", "standing_statics", "suggested_standing_pose",
+           "torque_limit_level"]

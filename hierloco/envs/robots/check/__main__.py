@@ -1,7 +1,10 @@
 """``hierloco-robot-check ROBOT`` (``python -m hierloco.envs.robots.check``): the description's problems in
 milliseconds (:mod:`hierloco.envs.robots.check`), then the search of the expert controller's parameters
 (:func:`hierloco.components.expert_tuning.tune_expert_parameters`), what made the difference, and the lines to
-paste: YAML lines for the robot's file, recipe overrides for the command line (``docs/robots.md``).
+paste: YAML lines for the robot's file, recipe overrides for the command line (``docs/robots.md``). A robot whose
+file and description give some joints no torque limit is read with provisional ones
+(:func:`hierloco.envs.robots.check.robot_for_check`) and the search finds the smallest that walks, printed as a
+``torque_limit:`` line: the motors' peak torque the gait needs, to check against the robot's motors.
 """
 
 from __future__ import annotations
@@ -13,6 +16,8 @@ from hierloco.envs.robots.check import (
     EXIT_NOT_FOUND,
     description_problems,
     description_summary,
+    provisional_torque_text,
+    robot_for_check,
 )
 
 
@@ -63,11 +68,9 @@ def main(argv=None) -> int:
     for name in ("experts", "epochs", "hidden"):
         if getattr(args, name) < 1:
             return fail(f"--{name} must be a positive whole number, got {getattr(args, name)}")
-    from hierloco.envs.robots import get_robot
-
     start = time.perf_counter()
     try:
-        robot = get_robot(args.robot)
+        robot = robot_for_check(args.robot)
         problems = description_problems(robot)
     except (ValueError, OSError) as error:
         return fail(error)
@@ -75,6 +78,8 @@ def main(argv=None) -> int:
     print(f"robot {robot.name} ({where}): {len(robot.legs)} legs, gait groups "
           f"{[list(g) for g in robot.gait_groups]}; now gait_period {robot.gait_period:g} s, standing_height "
           f"{robot.standing_height:.3f} m, swing_height {robot.swing_height:g} m")
+    if robot.provisional_torque_joints:
+        print(provisional_torque_text(robot))
     elapsed = time.perf_counter() - start
     if problems:
         print(f"description: {len(problems)} problem{'s' if len(problems) > 1 else ''} ({elapsed:.2f} s):")
@@ -98,8 +103,13 @@ def main(argv=None) -> int:
 def report_lines(result, *, where: str, epochs: int, hidden: int) -> list[str]:
     """What the check prints after its search (:class:`hierloco.components.expert_tuning.TuningResult`): the
     tracking table of the candidate the result is about (verified numbers under "verified", the screening's under
-    "screened"), then either what was found (which change made the difference, the YAML lines to paste, the
-    recipe overrides to paste) or what limits it, labelled verified or screened, and its parameters."""
+    "screened"), then either what was found (which change made the difference, for a torque limit the file lacks
+    a line saying it is the motors' peak torque the gait needs, the YAML lines to paste, the recipe overrides to
+    paste) or what limits it, labelled verified or screened, and its parameters."""
+    import numpy as np
+
+    from hierloco.components.expert_tuning import per_joint_text, torque_limit_levels
+
     params = result.params
     if params is None:
         return [f"not found in {result.seconds:.0f} s:", *(f"  - {line}" for line in result.limits)]
@@ -136,6 +146,13 @@ def report_lines(result, *, where: str, epochs: int, hidden: int) -> list[str]:
                      + (", ".join(needed) if needed else "no single change")
                      + (f"; more margin: {', '.join(margin)}" if margin else ""))
         lines += [f"  - {d.describe()}" for d in result.differences]
+    if params.torque_limit is not None and "torque_limit" in changed:
+        factor = next((f for limit, f in torque_limit_levels(result.robot)
+                       if np.allclose(limit, params.torque_limit)), None)
+        times = f", {factor:g} x the largest torque standing" if factor is not None else ""
+        lines.append(f"torque_limit {per_joint_text(result.robot, params.torque_limit)} N m{times}: the motors' peak "
+                     "torque the gait needs (the smallest level that walks; the file and the description give none): "
+                     "check it against your motors' peak torque before you paste it")
     lines += [f"paste into {where} (replacing these keys):", *yaml_lines]
     overrides = result.override_lines()
     if overrides:
