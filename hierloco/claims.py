@@ -19,6 +19,10 @@ we checked for it (:class:`Cause`, :func:`load_causes`); :func:`checks_markdown`
   source and check key that decide it, or the study it still needs;
 - :class:`Counted`: a statement about the design, counted rather than tested.
 
+**The ledger** (:func:`ledger`): ``paper_check.md`` counts one :class:`Entry` per claim of the paper and robot, its
+rows (:class:`Row`) its parts, combined as a multi-part check is (:func:`entry_check`); a row repeating an earlier
+section's test, or one its claim does not count (:attr:`Claim.counted`), is shown and not counted.
+
 ``hierloco verdicts`` imports every study's ``claims`` module (:meth:`ClaimRegistry.discover`: the studies of
 :data:`hierloco.pipeline.methods.STUDIES`, the recipe folders and the ``hierloco.studies`` entry points), reads the
 evidence (:func:`load`) and renders its pages from what is registered; it names no study.
@@ -54,7 +58,11 @@ from hierloco.evidence import (Run, adopt_configs, read_findings, read_records, 
 from hierloco.io import ArtifactError, load_yaml
 
 TASKS = ("velocity_tracking", "goal_reaching", "trajectory_tracking")
+ROBOTS = ("a1", "daisy")
 NOT_MEASURED = "not measured"
+NOT_MEASURED_YET = "not measured yet"
+PAPER_PAGE, SANITY_PAGE = "paper_check.md", "sanity_checks.md"
+EXTRA = "extra (not counted)"
 UNDECIDED = (stats.DOES_NOT_HOLD, stats.INCONCLUSIVE, stats.NOT_TESTABLE)
 
 
@@ -441,8 +449,9 @@ class Source:
     ``sets(evidence)``: the same checks on each set of the project's runs of the same configurations (the verdicts
     that differ between them make a claim fragile); ``questions(check)``: the checks that are the study's own
     questions rather than the paper's, listed in ``fragile_claims.md`` when inconclusive; ``note`` and ``pooling``:
-    what ``paper_check.md`` and ``fragile_claims.md`` say about how its runs are pooled. ``order``: where it stands
-    among the sources."""
+    what ``paper_check.md`` and ``fragile_claims.md`` say about how its runs are pooled; ``alias(name)``: the
+    configuration a side's name stands for where this source names it otherwise (say ``"lat:10000"`` for the
+    comparison's ``"lat:normal"``; :meth:`configuration`). ``order``: where it stands among the sources."""
 
     name: str
     _: KW_ONLY
@@ -454,8 +463,15 @@ class Source:
     folders: Callable | None = field(default=None, compare=False)
     sets: Callable | None = field(default=None, compare=False)
     questions: Callable | None = field(default=None, compare=False)
+    alias: Callable | None = field(default=None, compare=False)
     note: str = ""
     pooling: str = ""
+
+    def configuration(self, name: str) -> str:
+        """The configuration a side's name (a :class:`Part`'s ``names``) stands for in the terms every source
+        shares (``"<method>:<setting>"``), where this source names it otherwise (:attr:`alias`): how
+        :func:`ledger` finds a test another claim already made."""
+        return self.alias(name) if self.alias is not None else name
 
     def folder_of(self, check: Check) -> str:
         return self.folder(check) if self.folder else self.name
@@ -476,7 +492,11 @@ class Claim:
     key (before any ``:``) is ``key`` (and that ``select`` keeps, when given). ``note(checks)``: a line the page adds
     below its table (``checks``: every source's). A claim nothing here can measure has no source, ``needs``
     says what it would need (or what is measured of it outside a test), and ``status`` whether it is "not measured
-    yet" or "not testable here". ``order``: its place in the paper."""
+    yet" or "not testable here". ``robots``: the robots it is about (one entry of the ledger per robot, where it has
+    no checks). ``counted(check)``: whether a check counts toward its robot's entry (default: every check); the
+    others stay on the page labelled ``extra`` (say the IK variant the paper did not use). ``page``:
+    :data:`PAPER_PAGE` (``paper_check.md``) or :data:`SANITY_PAGE` (``sanity_checks.md``: a check that only shows
+    the set-up behaves, not a claim of the paper's results). ``order``: its place in the paper."""
 
     _: KW_ONLY
     order: float
@@ -489,6 +509,10 @@ class Claim:
     note: Callable | None = field(default=None, compare=False)
     needs: str = ""
     status: str = "not measured yet"   # a claim with no source: "not measured yet", or "not testable here" (why: needs)
+    robots: tuple[str, ...] = ROBOTS   # the robots it is about: one entry of the ledger each
+    counted: Callable | None = field(default=None, compare=False)
+    extra: str = ""
+    page: str = PAPER_PAGE
 
     def chosen(self, checks: dict[str, list[Check]]) -> list[Check]:
         """The checks that decide it."""
@@ -581,6 +605,135 @@ class ClaimRegistry:
 
 
 CLAIMS = ClaimRegistry()
+
+
+# --- the ledger: one entry per claim of the paper and robot -----------------------------------------------------------
+
+@dataclass(frozen=True)
+class Row:
+    """One check shown under an entry of the ledger, and why it does not count toward it where it does not
+    (``status``: ``""`` counted; ``"same test as section N"``, a repeat of a test an earlier section counts; or the
+    claim's label for an extra, :attr:`Claim.extra`)."""
+
+    check: Check
+    status: str = ""
+
+    @property
+    def counted(self) -> bool:
+        return not self.status
+
+
+@dataclass(frozen=True)
+class Entry:
+    """One claim of the paper on one robot, the unit of the ledger's tally (``docs/claims.md``): its ``rows`` (the
+    checks on that robot, each a part of the entry unless its status says otherwise), ``check`` the entry decided
+    from the counted rows (:func:`entry_check`; ``None`` where it has none), ``section`` the claim's number on its
+    page, and ``status`` where it has no check: ``"same test as section N"`` (every row repeats an earlier test: not
+    counted again), or a claim with no test here (``"not testable here"``, ``"not measured yet"``)."""
+
+    section: str
+    claim: Claim
+    robot: str
+    rows: tuple[Row, ...] = ()
+    check: Check | None = None
+    status: str = ""
+
+    @property
+    def verdict(self) -> str:
+        """The entry's verdict, or its status where it has no check."""
+        return self.check.verdict if self.check is not None else self.status
+
+    @property
+    def counted(self) -> bool:
+        """Whether the tally counts it: every entry but one whose every row repeats an earlier section's test."""
+        return self.check is not None or self.status in (stats.NOT_TESTABLE, NOT_MEASURED_YET)
+
+
+def entry_check(claim: str, robot: str, checks: list[Check]) -> Check:
+    """One entry decided from its rows (its parts), as a multi-part check is (:func:`combined`, an
+    intersection-union rule): it holds only when every row holds, does not hold when a row does not hold, is not
+    testable when none is, and is inconclusive otherwise; rows not measured are left out (all of them: not measured).
+    Its parts are every part of its rows, so its p-values (:func:`p_values`: for "holds" the largest p of its parts),
+    the multiplicity correction, the verdict at the pre-planned seeds and under other thresholds are the entry's.
+
+        >>> holds = decided("k", "c", "a1", "normal", "goal_reaching", "-", "-", [part("x", [0.1, 0.11, 0.12],
+        ...                 [0.5, 0.52, 0.51], "better")])
+        >>> refuted = decided("k", "c", "a1", "normal", "trajectory_tracking", "-", "-", [part("x", [0.5, 0.52, 0.51],
+        ...                   [0.5, 0.51, 0.53], "better")])
+        >>> entry_check("c", "a1", [holds]).verdict, entry_check("c", "a1", [holds, refuted]).verdict
+        ('holds', 'does not hold')
+    """
+    live = [c for c in checks if c.verdict != NOT_MEASURED]
+    verdict = combined([c.verdict for c in live]) if live else NOT_MEASURED
+    tasks = ", ".join(dict.fromkeys(c.task for c in live))
+    return Check("entry", claim, robot, "-", tasks, "-", "-", verdict, "", "", tuple(p for c in live for p in c.parts))
+
+
+def comparisons(check: Check, configuration: Callable[[str], str] | None = None) -> set[tuple]:
+    """What a check tests, one tuple per part: robot, setting, task, the configuration each side stands for
+    (``configuration``: a side's name in the terms every source shares, :meth:`Source.configuration`), the kind of
+    test, pairing and options. Two checks with the same tuples run the same test on the same configurations."""
+    name = configuration or (lambda n: n)
+    return {(check.robot, check.setting, check.task, name(p.names[0]), name(p.names[1]), p.kind, p.paired, p.options)
+            for p in check.parts}
+
+
+def ledger(claimed: list[tuple], configuration: Mapping[str, Callable] | None = None) -> list[Entry]:
+    """The entries of one page, in its order: ``claimed`` is ``(section, claim, checks)`` per claim (a claim with no
+    source, or no checks, gets one entry per robot of :attr:`Claim.robots` with its status); ``configuration``:
+    per source, the configuration each side's name stands for (:meth:`Source.configuration`). A check whose every
+    comparison an earlier section's counted check already makes (:func:`comparisons`) is shown as "same test as
+    section N" and not counted again; a check the claim does not count (:attr:`Claim.counted`) is shown as its
+    extra; each robot's counted checks are its entry (:func:`entry_check`).
+
+        >>> best = Claim(order=1, words="LAT is best", where="-", source="s", key="best")
+        >>> again = Claim(order=2, words="LIB is worse than LAT", where="-", source="s", key="worse")
+        >>> lat, lib = [0.1, 0.11, 0.12], [0.5, 0.52, 0.51]
+        >>> check = lambda key: decided(key, key, "a1", "normal", "velocity_tracking", "-", "-",
+        ...                             [part("lat vs lib", lat, lib, "better", names=("lat:normal", "lib:normal"))])
+        >>> [(e.section, e.verdict, e.counted) for e in ledger([("1", best, [check("best")]),
+        ...                                                     ("2", again, [check("worse")])])]
+        [('1', 'holds', True), ('2', 'same test as section 1', False)]
+    """
+    configuration = dict(configuration or {})
+    seen: dict[tuple, str] = {}
+    order = [section for section, *_ in claimed]
+    entries = []
+    for section, claim, checks in claimed:
+        if not claim.source or not checks:
+            status = claim.status if not claim.source else NOT_MEASURED_YET
+            entries += [Entry(section, claim, robot, status=status) for robot in claim.robots]
+            continue
+        name = configuration.get(claim.source)
+        rows = []
+        for check in checks:
+            tested = comparisons(check, name)
+            if claim.counted is not None and not claim.counted(check):
+                rows.append(Row(check, claim.extra or EXTRA))
+            elif tested and tested <= set(seen):
+                earlier = ", ".join(sorted({seen[t] for t in tested}, key=order.index))
+                rows.append(Row(check, f"same test as section {earlier}"))
+            else:
+                rows.append(Row(check))
+        for row in rows:
+            for tested in (comparisons(row.check, name) if row.counted else ()):
+                seen.setdefault(tested, section)
+        for robot in dict.fromkeys(c.robot for c in checks):
+            mine = tuple(r for r in rows if r.check.robot == robot)
+            counted = [r.check for r in mine if r.counted]
+            repeats = sorted({r.status for r in mine if r.status.startswith("same test")})
+            entries.append(Entry(section, claim, robot, mine, entry_check(claim.words, robot, counted) if counted
+                                 else None, "" if counted else "; ".join(repeats) or EXTRA))
+    return entries
+
+
+def entry_counts(entries: list[Entry]) -> dict[str, int]:
+    """How many counted entries got each verdict (:data:`hierloco.stats.VERDICTS`, then "not measured yet")."""
+    counted = [e for e in entries if e.counted]
+    tally = {v: sum(e.verdict == v for e in counted) for v in stats.VERDICTS}
+    tally[NOT_MEASURED_YET] = sum(e.verdict in (NOT_MEASURED, NOT_MEASURED_YET) for e in counted)
+    return tally
+
 
 
 # --- the evidence --------------------------------------------------------------------------------------------------
@@ -676,7 +829,9 @@ def load(results, names: Mapping | None = None, *, registry: ClaimRegistry | Non
     return evidence
 
 
-__all__ = ["CLAIMS", "Cause", "Check", "Claim", "ClaimRegistry", "Counted", "Evidence", "NOT_MEASURED", "Part",
+__all__ = ["CLAIMS", "Cause", "Check", "Claim", "ClaimRegistry", "Counted", "EXTRA", "Entry", "Evidence",
+           "NOT_MEASURED", "NOT_MEASURED_YET", "PAPER_PAGE", "Part", "ROBOTS", "Row", "SANITY_PAGE", "comparisons",
+           "entry_check", "entry_counts", "ledger",
            "PLANNED_SEEDS", "combined", "corrected", "counts_line_of", "deciding_p", "is_borderline", "p_values",
            "planned", "redecided", "verdict_text",
            "Source", "Study", "TASKS", "UNDECIDED", "checks_markdown", "counts_line", "decided", "describe",

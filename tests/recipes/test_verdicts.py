@@ -40,7 +40,7 @@ def test_pages_decide_pool_and_name_what_is_not_measured(tmp_path):
     evidence = load(results)
     written = pages(evidence)
     assert set(written) == {"compare_full/verdicts.md", "adverse/verdicts.md", "paper_check.md",
-                            "fragile_claims.md"}
+                            "sanity_checks.md", "fragile_claims.md"}
     study = written["compare_full/verdicts.md"]
     assert "`hierloco verdicts`" in study and "| LIB is worse than LAT at velocity tracking | a1 |" in study
     paper = written["paper_check.md"]

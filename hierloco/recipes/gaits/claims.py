@@ -65,7 +65,7 @@ SOURCE = Source(
     folder=lambda check: next(study.name for study in STUDIES if study.robot == check.robot))
 
 GAIT_NEEDED = Claim(
-    order=20, where="Sec. V; Fig. 9", source="gaits", key="gait_needed",
+    order=20, where="Sec. V; Fig. 9", source="gaits", key="gait_needed", robots=("daisy",),
     words="\"Our learned latent space can induce gait transitions in the low-level if needed by the task\" (Fig. 9); "
           "\"the high-level latent action space can be used to transit between gaits, if needed by the task\" (ours: "
           "Daisy's experts in tripod over its whole command box and in a ripple that walks only slowly, one latent "
@@ -73,8 +73,9 @@ GAIT_NEEDED = Claim(
 
 A1_TRANSITIONS = Claim(
     order=20.1, words="gait transitions \"if needed by the task\" on A1 (trot, pace, bound in one latent space)",
-    where="Sec. V (\"on both robot simulations\"), Fig. 9", status="not testable here",
-    needs="an A1 speed profile whose fast targets only some gaits reach (the design of section 20, run on Daisy only); "
+    where="Sec. V (\"on both robot simulations\"), Fig. 9", status="not testable here", robots=("a1",),
+    needs="an A1 speed profile whose fast targets only some gaits reach (the design of the Daisy gait claim above, run "
+          "on Daisy only); "
           "measured outside a test: A1's latent space over several gaits costs 0.643 (seeds 0, 2) against its own "
           "gait's 0.190 (3 seeds), \"several gaits cost as little as the own gait\" does not hold "
           "(`gaits/README.md`), so a gait transition on A1 would come at a cost the test here has not weighed")

@@ -12,7 +12,8 @@ import math
 
 import numpy as np
 
-from hierloco.claims import CLAIMS, TASKS, Check, Claim, Evidence, Source, Study, decided, describe, job_minutes, part
+from hierloco.claims import (CLAIMS, SANITY_PAGE, TASKS, Check, Claim, Evidence, Source, Study, decided, describe,
+                             job_minutes, part)
 from hierloco.claims import seed_costs
 from hierloco.evidence import Run, distinct, select
 
@@ -110,8 +111,10 @@ DAISY_HARDWARE = ("Daisy hardware (Sec. IV-D, Fig. 10a): velocity tracking 0.56 
 
 PAPER_CLAIMS = (
     Claim(order=9, words="on hardware LAT, its low level kept from simulation and its dynamics learned from 2000 "
-                         "samples, \"achieves multiple locomotion tasks\" (ours: a perturbed robot in simulation)",
-          where="Abstract; Sec. IV-D; Fig. 1, 8, 10a", paper=DAISY_HARDWARE, source="hardware", key="hardware_solves"),
+                         "samples, \"achieves multiple locomotion tasks\" (ours: a perturbed robot in simulation; a "
+                         "sanity check: LAT walks better than standing still)",
+          where="Abstract; Sec. IV-D; Fig. 1, 8, 10a", paper=DAISY_HARDWARE, source="hardware", key="hardware_solves",
+          page=SANITY_PAGE),
     Claim(order=10, words="on hardware \"its performance was worse than in simulation\"", where="Sec. IV-D",
           paper=DAISY_HARDWARE, source="hardware", key="hardware_worse"),
     Claim(order=10.1, words="slipping \"and other unobserved factors are directly absorbed in our dynamics\"",
@@ -123,11 +126,11 @@ PAPER_CLAIMS = (
           needs="each latent's CoM height, roll and pitch beside its velocity: not recorded"),
     Claim(order=10.3, words="the hardware gap's causes (1/5 of the samples; noisy joint tracking, slipping and CoM "
                             "estimation; fast controllers that did not transfer), and that more hardware samples "
-                            "would reduce it", where="Sec. IV-D", status="not testable here",
+                            "would reduce it", where="Sec. IV-D", status="not testable here", robots=("daisy",),
           needs="a verdict over seeds per factor: the factors are studied one at a time in `hardware_a1_factors/` and "
                 "`hardware_daisy_factors/` (their READMEs) without a stated test, and no study varies the samples on "
                 "the perturbed robot"),
-    Claim(order=100, words="the same results on the real Daisy (Fig. 8, 10a)", where="Sec. IV-D",
+    Claim(order=100, words="the same results on the real Daisy (Fig. 8, 10a)", where="Sec. IV-D", robots=("daisy",),
           needs="a real robot: the hardware studies here perturb a simulated copy (mass, motors, friction, latency, "
                 "CoM noise), which is what they measure"),
 )

@@ -10,9 +10,13 @@ checks of its page, the sets of checks the paper's claims are decided from and t
 and writes:
 
 - ``<study>/verdicts.md`` for each study with checks of its own: that study's own runs only;
-- ``paper_check.md``: every registered claim of the paper (Li et al., RA-L 2021), where the paper makes it, the
-  numbers it states (with robot and figure), ours (one number per configuration, with the folders its runs come
-  from), the test and the verdict; claims nothing measures yet are named with the study they need;
+- ``paper_check.md``: the ledger of every registered claim of the paper (Li et al., RA-L 2021), one entry per claim
+  and robot (:func:`hierloco.claims.ledger`, ``docs/claims.md``): where the paper makes it, the numbers it states
+  (with robot and figure), each entry's verdict combined from its rows, and every row (ours: one number per
+  configuration, with the folders its runs come from; the test; whether it counts: a repeat of an earlier section's
+  test or an extra does not); claims nothing measures yet are named with the study they need;
+- ``sanity_checks.md``: the claims declared on :data:`hierloco.claims.SANITY_PAGE` (checks that only show the set-up
+  behaves), rendered alike and not counted in the ledger;
 - ``fragile_claims.md``: every claim that is inconclusive, or whose verdict differs between the project's runs of
   the same configuration, with the seeds a power estimate asks for and the compute they take (``builds.json``),
   and every configuration that gave different numbers when run again.
@@ -34,9 +38,10 @@ from pathlib import Path
 import numpy as np
 
 from hierloco import stats
-from hierloco.claims import (CLAIMS, NOT_MEASURED, PLANNED_SEEDS, Check, ClaimRegistry, Evidence, Source, Study,
-                             checks_markdown, corrected, counts_line, counts_line_of, is_borderline, load, locate,
-                             planned, redecided, seed_costs, verdict_text)
+from hierloco.claims import (CLAIMS, NOT_MEASURED, NOT_MEASURED_YET, PAPER_PAGE, PLANNED_SEEDS, SANITY_PAGE, Check,
+                             ClaimRegistry, Entry, Evidence, Source, Study, checks_markdown, corrected, counts_line,
+                             counts_line_of, entry_counts, is_borderline, ledger, load, locate, planned, redecided,
+                             seed_costs, verdict_text)
 from hierloco.evidence import Run, replicates
 from hierloco.io import write_text
 
@@ -63,9 +68,14 @@ def paper_checks(evidence: Evidence, registry: ClaimRegistry = CLAIMS) -> dict[s
 
 def paper_claims(checks: dict[str, list[Check]], registry: ClaimRegistry = CLAIMS) -> list[tuple]:
     """Each registered claim that something here measures, in the paper's order, with the checks that decide it:
-    ``(number, claim, checks)``."""
-    return [(number, claim, claim.chosen(checks))
-            for number, claim in enumerate((c for c in registry.claims() if c.source), 1)]
+    ``(number, claim, checks)``, numbered on its page (``paper_check.md``: 1, 2, ...; ``sanity_checks.md``: S1,
+    S2, ...)."""
+    out, counters = [], {}
+    for claim in (c for c in registry.claims() if c.source):
+        counters[claim.page] = counters.get(claim.page, 0) + 1
+        prefix = "" if claim.page == PAPER_PAGE else "S"
+        out.append((f"{prefix}{counters[claim.page]}", claim, claim.chosen(checks)))
+    return out
 
 
 # --- pages ---------------------------------------------------------------------------------------------------------
@@ -142,70 +152,188 @@ def ours_text(check: Check, folders: dict | None = None, folder: str = "") -> st
     return "; ".join(parts) if parts else check.ours
 
 
-def paper_page(evidence: Evidence, checks: dict[str, list[Check]], registry: ClaimRegistry = CLAIMS) -> str:
-    """``paper_check.md``: every registered claim of the paper with its verdicts."""
+def page_entries(checks: dict[str, list[Check]], page: str, registry: ClaimRegistry = CLAIMS) -> list[Entry]:
+    """The entries of one page (:data:`hierloco.claims.PAPER_PAGE` or :data:`hierloco.claims.SANITY_PAGE`;
+    :func:`hierloco.claims.ledger`): its claims that something here measures, numbered in the paper's order (the
+    sanity checks ``S1``, ``S2``, ...), then the paper's claims with no test here."""
+    numbered = [claimed for claimed in paper_claims(checks, registry) if claimed[1].page == page]
+    untested = [("", claim, []) for claim in registry.claims() if not claim.source and claim.page == page]
+    sources = {source.name: source.configuration for source in registry.sources()}
+    return ledger(numbered + untested, sources)
+
+
+def _entry_text(entry: Entry, fixed: str) -> str:
+    if entry.check is None:
+        return f"{entry.status} (not counted again)" if entry.status.startswith("same test") else entry.status
+    return verdict_text(entry.check, fixed, bold=True)
+
+
+def _section(number: str, claim, entries: list[Entry], evidence: Evidence, checks: dict, sources: dict,
+             folders: dict) -> tuple[list[str], list[str]]:
+    """One claim's section: its entries (one per robot) with their verdicts, then every row (the evidence); and the
+    entries' verdicts after Holm's correction over the claim's entries."""
+    lines = [f"## {number}. {claim.words}\n\n{claim.where}. The paper's numbers: {claim.paper}.\n"]
+    rows = [row for entry in entries for row in entry.rows]
+    if not rows:
+        lines.append(f"**not measured yet** (no runs of the study it needs: `{claim.source}`).\n")
+        return lines, []
+    decided_ = [e for e in entries if e.check is not None]
+    holm = dict(zip(map(id, decided_), corrected([e.check for e in decided_])))
+    fixed = [holm.get(id(e), e.verdict) for e in decided_]
+    again = [e for e in entries if not e.counted]
+    verdicts = (f"Verdicts (entries, one per robot): {counts_line([e.check for e in decided_])} (after Holm's "
+                f"correction over this claim's {len(decided_)} entries: {counts_line_of(fixed)})." if decided_ else
+                "Verdicts (entries, one per robot): none counted here.")
+    lines.append(verdicts + (f" Not counted again: {', '.join(e.robot for e in again)} (every row is a test an "
+                             f"earlier section counts: {'; '.join(dict.fromkeys(e.status for e in again))})."
+                             if again else "") + "\n")
+    lines.append(f"| entry | verdict (the rows counted, combined) | Holm (family: this claim's entries) | at seeds "
+                 f"0-{PLANNED_SEEDS - 1} | rows counted |")
+    lines.append("|---|---|---|---|---|")
+    for entry in entries:
+        counted = sum(r.counted for r in entry.rows)
+        if entry.check is None:
+            lines.append(f"| {entry.robot} | {_entry_text(entry, '')} | - | - | 0 of {len(entry.rows)} |")
+            continue
+        lines.append(f"| {entry.robot} | {_entry_text(entry, holm[id(entry)])} | {holm[id(entry)]} | "
+                     f"{planned(entry.check) or 'same seeds'} | {counted} of {len(entry.rows)} |")
+    source = sources[claim.source]
+    if source.folders is not None and claim.source not in folders:
+        folders[claim.source] = source.folders(evidence)
+    row_holm = corrected([r.check for r in rows])
+    lines.append("\nThe rows (the evidence: each entry's parts):\n")
+    lines.append("| robot | setting | task | claim tested | ours (per configuration) | test | counts toward the "
+                 "entry | verdict | Holm (family: this claim's rows, as before) | at seeds "
+                 f"0-{PLANNED_SEEDS - 1} | folder |")
+    lines.append("|---|---|---|---|---|---|---|---|---|---|---|")
+    for row, fixed_row in zip(rows, row_holm):
+        check = row.check
+        folder = source.folder_of(check)
+        ours = ours_text(check, folders[claim.source]) if source.folders is not None else \
+            ours_text(check, folder=folder)
+        if "goals reached" in check.ours:   # what follows the cost: the goals reached, and in how many steps
+            ours += check.ours[check.ours.index(";"):]
+        lines.append(f"| {check.robot} | {check.setting} | {check.task} | {check.claim} | {ours} | "
+                     f"{check.detail or '-'} | {'yes' if row.counted else row.status} | "
+                     f"{verdict_text(check, fixed_row, bold=True)} | {fixed_row} | "
+                     f"{planned(check) or 'same seeds'} | {folder} |")
+    if claim.note is not None and (note := claim.note(checks)):
+        lines.append(note)
+    lines.append("")
+    return lines, fixed
+
+
+ENTRY_RULE = ("An entry is one claim of the paper on one robot; its rows are its parts (tasks, settings, methods "
+              "compared). It **holds** only when every part counted in it holds, **does not hold** when a part does "
+              "not hold, is not testable here when no part is, and is **inconclusive** otherwise (an "
+              "intersection-union rule, as for a claim of several comparisons); beside it its p: for \"holds\" the "
+              "largest p of its parts, for \"does not hold\" the smallest refuting p (times the comparisons it is "
+              "refuted among). A row whose every comparison (the same configurations on each side, the same test) "
+              "an earlier section already counts is shown, marked \"same test as section N\", and not counted again "
+              "(its numbers may differ a little where the earlier section pools more runs of the same "
+              "configurations); "
+              "a row a claim does not count (an extra, the label says why) is shown and not counted. Holm's "
+              "correction runs over each claim's entries (the family: one numbered claim's entries, one per robot), "
+              "establishing and refuting p-values adjusted separately.")
+
+
+def ledger_page(evidence: Evidence, checks: dict[str, list[Check]], page: str = PAPER_PAGE,
+                registry: ClaimRegistry = CLAIMS) -> str:
+    """``paper_check.md`` (``page``: :data:`hierloco.claims.PAPER_PAGE`): every registered claim of the paper as
+    entries, one per robot (:func:`page_entries`), each with its rows, the claims with no test here, the statements
+    counted rather than tested and the tally's sensitivity; or ``sanity_checks.md``
+    (:data:`hierloco.claims.SANITY_PAGE`): the sanity checks, rendered alike."""
     sources = {source.name: source for source in registry.sources()}
     notes = "".join(f"{source.note} " for source in sources.values() if source.note)
-    lines = [f"# The paper's claims, judged with statistics\n",
-             "Li, Calandra, Pathak, Tian, Meier, Rai, *Planning in Learned Latent Action Spaces for Generalizable "
-             "Legged Locomotion*, RA-L 2021: every claim its text and figures make (figures numbered in the order of "
-             "the paper's source), the numbers it states with their robot and figure (its normalisation is not "
-             "ours: orderings and ratios compare, absolute values do not), ours, the test and the verdict.",
-             f"\n{_generated('the job records of ' + ', '.join(f'`{v}`' for v in evidence.sources.values()))}\n",
-             "**Ours**: per configuration, the mean over seeds of each seed's mean normalised cost, the number of "
-             f"seeds and the folders under `results/` its runs come from. {notes}Each study's verdicts on its own "
-             "runs: `<study>/verdicts.md`.\n"]
-    everything, folders, holms = [], {}, []
-    claimed = paper_claims(checks, registry)
-    for number, claim, chosen in claimed:
-        everything += chosen
-        lines.append(f"## {number}. {claim.words}\n\n{claim.where}. The paper's numbers: {claim.paper}.\n")
-        if not chosen:
-            lines.append(f"**not measured yet** (no runs of the study it needs: `{claim.source}`).\n")
-            continue
-        source = sources[claim.source]
-        if source.folders is not None and claim.source not in folders:
-            folders[claim.source] = source.folders(evidence)
-        holm = corrected(chosen)
-        holms += holm
-        lines.append(f"Verdicts: {counts_line(chosen)} (after Holm's correction over this claim's "
-                     f"{len(chosen)} checks: {counts_line_of(holm)}).\n")
-        lines.append("| robot | setting | task | claim tested | ours (per configuration) | test | verdict | "
-                     f"Holm (family: this claim) | at seeds 0-{PLANNED_SEEDS - 1} | folder |")
-        lines.append("|---|---|---|---|---|---|---|---|---|---|")
-        for check, fixed in zip(chosen, holm):
-            folder = source.folder_of(check)
-            ours = ours_text(check, folders[claim.source]) if source.folders is not None else \
-                ours_text(check, folder=folder)
-            if "goals reached" in check.ours:   # what follows the cost: the goals reached, and in how many steps
-                ours += check.ours[check.ours.index(";"):]
-            lines.append(f"| {check.robot} | {check.setting} | {check.task} | {check.claim} | {ours} | "
-                         f"{check.detail or '-'} | {verdict_text(check, fixed, bold=True)} | {fixed} | "
-                         f"{planned(check) or 'same seeds'} | {folder} |")
-        if claim.note is not None and (note := claim.note(checks)):
-            lines.append(note)
+    paper = page == PAPER_PAGE
+    records = _generated('the job records of ' + ', '.join(f'`{v}`' for v in evidence.sources.values()))
+    if paper:
+        lines = ["# The paper's claims, judged with statistics\n",
+                 "Li, Calandra, Pathak, Tian, Meier, Rai, *Planning in Learned Latent Action Spaces for "
+                 "Generalizable Legged Locomotion*, RA-L 2021: every claim its text and figures make (figures "
+                 "numbered in the order of the paper's source), the numbers it states with their robot and figure "
+                 "(its normalisation is not ours: orderings and ratios compare, absolute values do not), ours, the "
+                 "test and the verdict, one entry per claim and robot.",
+                 f"\n{records}\n"]
+    else:
+        lines = ["# Sanity checks: the set-up behaves as it should\n",
+                 "Checks that only show the set-up behaves (damage hurts a controller; a method walks better than "
+                 "standing still), not a claim of the paper's results, so they are not counted in the ledger of "
+                 "[`paper_check.md`](paper_check.md); decided and shown as its claims are.",
+                 f"\n{records}\n"]
+    lines.append("**Ours**: per configuration, the mean over seeds of each seed's mean normalised cost, the number of "
+                 f"seeds and the folders under `results/` its runs come from. {notes}Each study's verdicts on its own "
+                 f"runs: `<study>/verdicts.md`. {ENTRY_RULE}\n")
+    entries = page_entries(checks, page, registry)
+    folders: dict = {}
+    fixed_all: list[str] = []
+    for number in dict.fromkeys(e.section for e in entries if e.section):
+        mine = [e for e in entries if e.section == number]
+        found, fixed = _section(number, mine[0].claim, mine, evidence, checks, sources, folders)
+        lines += found
+        fixed_all += fixed
+    untested = [e for e in entries if not e.section]
+    if paper:
+        claims = list(dict.fromkeys(e.claim for e in untested))
+        lines.append("## Claims not measured yet, or not testable here\n")
+        lines.append("Each counted as one entry per robot it is about, with this verdict.\n")
+        lines.append("| claim | where | verdict | why; what it needs | entries (robots) |")
+        lines.append("|---|---|---|---|---|")
+        lines += [f"| {c.words} | {c.where} | {c.status} | {c.needs} | {', '.join(c.robots)} |" for c in claims]
+        counted = [(statement, found) for statement in registry.counted() if (found := statement.count(evidence))]
+        if counted:
+            lines.append("\n## Statements about the design, counted rather than tested\n")
+            lines += [statement.words + "; ".join(found) + "." for statement, found in counted]
         lines.append("")
-    unmeasurable = [c for c in registry.claims() if not c.source]
-    lines.append("## Claims not measured yet, or not testable here\n")
-    lines.append("| claim | where | verdict | why; what it needs |")
-    lines.append("|---|---|---|---|")
-    lines += [f"| {c.words} | {c.where} | {c.status} | {c.needs} |" for c in unmeasurable]
-    counted = [(statement, found) for statement in registry.counted() if (found := statement.count(evidence))]
-    if counted:
-        lines.append("\n## Statements about the design, counted rather than tested\n")
-        lines += [statement.words + "; ".join(found) + "." for statement, found in counted]
-    unmeasured = len(unmeasurable) + sum(not chosen for *_, chosen in claimed)
-    lines += sensitivity(evidence, everything)
-    borderline = sum(is_borderline(c, h) for c, h in zip(everything, holms))
-    later = [(c, v) for c in everything if (v := planned(c)) is not None]
-    lines.insert(4, f"**All claims tested: {counts_line(everything)}** (plus {unmeasured} not measured yet or not "
-                    f"testable here). "
-                    f"**After Holm's correction within each claim** (the family: one numbered claim's checks): "
-                    f"{counts_line_of(holms)}. {borderline} verdicts are borderline. At the pre-planned "
-                    f"{PLANNED_SEEDS} seeds (seeds 0-{PLANNED_SEEDS - 1}; the {len(later)} checks with a side run on "
-                    f"more seeds, added where verdicts looked fragile: optional stopping), "
-                    f"{sum(c.verdict != v for c, v in later)} verdicts differ from the final ones.\n")
+    tested = [e for e in entries if e.check is not None]
+    if paper:
+        lines += sensitivity(evidence, [e.check for e in tested], unit="entries")
+    tally = entry_counts(entries)
+    no_test = [e for e in entries if e.counted and e.check is None]
+    borderline = sum(is_borderline(e.check, h) for e, h in zip(tested, fixed_all))
+    later = [(e.check, v) for e in tested if (v := planned(e.check)) is not None]
+    repeated = sum(1 for e in entries if e.section and not e.counted)
+    names = {stats.HOLDS: "hold", stats.DOES_NOT_HOLD: "do not hold", stats.INCONCLUSIVE: "inconclusive",
+             stats.NOT_TESTABLE: "not testable here", NOT_MEASURED_YET: "not measured yet"}
+    whole = ", ".join(f"{n} {names[v]}" for v, n in tally.items() if n or v != NOT_MEASURED_YET)
+    head = (f"**{'The ledger' if paper else 'The sanity checks'}: {sum(tally.values())} entries, one per "
+            f"{'claim of the paper' if paper else 'check'} and robot: {whole}**"
+            + (f" ({len(tested)} with a test: {counts_line([e.check for e in tested])}; {len(no_test)} with no test "
+               f"here, listed below)" if no_test else "") + ". "
+            f"**After Holm's correction within each claim** (the family: one numbered claim's entries, one per "
+            f"robot): {counts_line_of(fixed_all)}. {borderline} entry verdicts are borderline. At the pre-planned "
+            f"{PLANNED_SEEDS} seeds (seeds 0-{PLANNED_SEEDS - 1}; the {len(later)} entries with a side run on more "
+            f"seeds, added where verdicts looked fragile: optional stopping), {sum(c.verdict != v for c, v in later)} "
+            f"entry verdicts differ from the final ones."
+            + (f" {repeated} entries repeat an earlier section's tests and are not counted again." if repeated else ""))
+    if paper:
+        rows = [(claim, chosen) for _, claim, chosen in paper_claims(checks, registry)]
+        every = [c for _, chosen in rows for c in chosen]
+        holm_rows = [v for _, chosen in rows for v in corrected(chosen)]
+        sanity = [c for c in registry.claims() if c.source and c.page == SANITY_PAGE]
+        head += (f" Per row, as before (every row of every section, the sanity checks, the repeated tests and the "
+                 f"extras included): {counts_line(every)}; after Holm's correction within each claim's rows "
+                 f"{counts_line_of(holm_rows)}.")
+        questions = "; ".join(study.questions for study in registry.studies() if study.questions)
+        if sanity:
+            head += (f"\n\nSanity checks ({len(sanity)}: "
+                     + "; ".join(f"S{i}. {c.words}" for i, c in enumerate(sanity, 1))
+                     + ") show only that the set-up behaves, not a result of the paper: they are on "
+                       "[`sanity_checks.md`](sanity_checks.md), not counted here.")
+        head += (" The studies' own questions" + (f" ({questions})" if questions else "")
+                 + " are decided on each study's `verdicts.md` only, not counted here.")
+    lines.insert(4, head + "\n")
     return "\n".join(lines) + "\n"
+
+
+def paper_page(evidence: Evidence, checks: dict[str, list[Check]], registry: ClaimRegistry = CLAIMS) -> str:
+    """``paper_check.md`` (:func:`ledger_page`)."""
+    return ledger_page(evidence, checks, PAPER_PAGE, registry)
+
+
+def sanity_page(evidence: Evidence, checks: dict[str, list[Check]], registry: ClaimRegistry = CLAIMS) -> str:
+    """``sanity_checks.md`` (:func:`ledger_page`)."""
+    return ledger_page(evidence, checks, SANITY_PAGE, registry)
 
 
 # --- how the tally depends on the thresholds -------------------------------------------------------------------------
@@ -222,7 +350,7 @@ def noise(evidence: Evidence, task: str = "trajectory_tracking", walks: float = 
     return out
 
 
-def sensitivity(evidence: Evidence, checks: list[Check]) -> list[str]:
+def sensitivity(evidence: Evidence, checks: list[Check], unit: str = "checks") -> list[str]:
     """The section of ``paper_check.md`` on how the tally of ``checks`` depends on the minimum effect, the margin and
     the 0.01 floor, and on the multiplicity correction's family, with the measured noise the floor is set against."""
     def row(name, verdicts):
@@ -230,7 +358,7 @@ def sensitivity(evidence: Evidence, checks: list[Check]) -> list[str]:
 
     spread = noise(evidence)
     lines = ["## How the tally depends on the thresholds\n",
-             "The same checks decided again with other thresholds (a comparison's own thresholds, where it states "
+             f"The same {unit} decided again with other thresholds (a comparison's own thresholds, where it states "
              "them, kept), and with the multiplicity correction over other families.\n",
              "| rule | " + " | ".join(stats.VERDICTS) + " |", "|---|---|---|---|---|",
              row(f"as decided (min effect {stats.MIN_EFFECT_REL:.0%}, margin {stats.EQUIV_MARGIN_REL:.0%}, floor "
@@ -239,8 +367,9 @@ def sensitivity(evidence: Evidence, checks: list[Check]) -> list[str]:
                                                       for c in checks])]
     lines += [row(f"min effect {rel:.0%}", [redecided(c, min_effect_rel=rel) for c in checks]) for rel in (0.05, 0.2)]
     lines += [row(f"margin {rel:.0%}", [redecided(c, margin_rel=rel) for c in checks]) for rel in (0.1, 0.4)]
-    lines += [row("Holm over every check of the page (one family)", corrected(checks)),
-              row("Benjamini-Hochberg over every check of the page",
+    single = "check" if unit == "checks" else "checked entry"
+    lines += [row(f"Holm over every {single} of the page (one family)", corrected(checks)),
+              row(f"Benjamini-Hochberg over every {single} of the page",
                   corrected(checks, adjust=stats.benjamini_hochberg))]
     if spread:
         lines.append(f"\n**The floor against the noise.** The seed-to-seed standard deviation of the "
@@ -479,7 +608,8 @@ def pages(evidence: Evidence, registry: ClaimRegistry = CLAIMS) -> dict[str, str
     out = {f"{name}/verdicts.md": study_page(studies[name], checks, evidence)
            for name, checks in study_checks(evidence).items()}
     checks = paper_checks(evidence, registry)
-    out["paper_check.md"] = paper_page(evidence, checks, registry)
+    out[PAPER_PAGE] = paper_page(evidence, checks, registry)
+    out[SANITY_PAGE] = sanity_page(evidence, checks, registry)
     out["fragile_claims.md"] = fragile_page(evidence, checks, registry)
     return out
 
@@ -518,4 +648,5 @@ def main(argv=None) -> int:
     return 0
 
 
-__all__ = ["COMMAND", "Need", "fragile", "load", "main", "pages", "paper_checks", "study_checks", "write_all"]
+__all__ = ["COMMAND", "Need", "fragile", "ledger_page", "load", "main", "page_entries", "pages", "paper_checks",
+           "sanity_page", "study_checks", "write_all"]
