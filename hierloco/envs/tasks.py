@@ -87,6 +87,23 @@ def _whole(name: str, value, minimum: int) -> int:
     return int(value)
 
 
+def _range(name: str, value, *, positive: bool = False) -> tuple[float, float]:
+    """``value`` as ``(low, high)`` with ``low <= high`` (both > 0 with ``positive``), else ``ValueError``."""
+    if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") or len(value) != 2:
+        raise ValueError(f"{name} must be [low, high], got {value!r}")
+    low, high = (_number(name, v, positive=positive) for v in value)
+    if low > high:
+        raise ValueError(f"{name} must be [low, high] with low <= high, got {list(value)!r}")
+    return low, high
+
+
+def _spread_angles(rng: np.random.Generator, count: int) -> np.ndarray:
+    """``count`` angles (rad): one uniform in each of ``count`` equal sectors of the circle, in a random order. Every
+    angle has the same distribution and any half of them (a training split) covers the circle as the other half
+    does, where independent uniform draws may leave whole sectors empty."""
+    return rng.permutation(2 * np.pi * (np.arange(count) + rng.uniform(0.0, 1.0, count)) / count)
+
+
 def _points(name: str, value, what: str, min_points: int = 1) -> np.ndarray:
     """``value`` as a finite ``K x 2`` float64 array (``K >= min_points``), or a ``ValueError`` naming ``name``."""
     try:
@@ -308,10 +325,18 @@ class TaskResult:
 class VelocityTracking(Task):
     """Track world-frame CoM velocities: each target held ``steps_per_target`` steps, the schedule ``rounds`` times.
 
-    Default: (0, 0.2), (0.2, 0), (0, -0.2), (-0.2, 0) m/s, 5 steps each, twice round (40 steps).
+    Default: (0, 0.2), (0.2, 0), (0, -0.2), (-0.2, 0) m/s, 5 steps each, twice round (40 steps). With
+    ``num_random`` = K > 0 the schedule is K velocities drawn from ``targets_seed`` instead: headings one in each
+    of K equal sectors of the circle, uniform within it, in a random order (:func:`_spread_angles`), speeds uniform
+    in ``speed_range_mps``, so its two halves come from one distribution (``docs/tasks.md``, fair held-out
+    targets).
 
     Training split: the first half of the schedule (``ceil(K / 2)`` targets; for the default (0, 0.2) and (0.2, 0),
     one on each axis), repeated for at least as many steps as the whole task.
+
+        >>> task = VelocityTracking(num_random=8, speed_range_mps=(0.1, 0.3), targets_seed=45, rounds=1)
+        >>> task.num_steps, bool(task.velocities.norm(dim=-1).min() >= 0.1)
+        (40, True)
     """
 
     kind = "velocity_tracking"
@@ -320,8 +345,14 @@ class VelocityTracking(Task):
     target_is_velocity = True
 
     def __init__(self, velocities: Sequence[Sequence[float]] = ((0.0, 0.2), (0.2, 0.0), (0.0, -0.2), (-0.2, 0.0)),
-                 steps_per_target: int = 5, rounds: int = 2, name: str | None = None):
+                 steps_per_target: int = 5, rounds: int = 2, num_random: int = 0,
+                 speed_range_mps: Sequence[float] = (0.1, 0.3), targets_seed: int = 0, name: str | None = None):
         super().__init__(name)
+        if _whole("num_random", num_random, 0):
+            low, high = _range("speed_range_mps", speed_range_mps)
+            rng = np.random.default_rng(_whole("targets_seed", targets_seed, 0))
+            headings, speeds = _spread_angles(rng, num_random), rng.uniform(low, high, num_random)
+            velocities = np.stack([speeds * np.cos(headings), speeds * np.sin(headings)], -1)
         points = _points("velocities", velocities, "(vx, vy) pairs in m/s")
         self.velocities = torch.as_tensor(points.astype(np.float32), device="cpu")
         self.steps_per_target = _whole("steps_per_target", steps_per_target, 1)
@@ -348,17 +379,35 @@ class GoalReaching(Task):
     """Reach goals evenly spread on a circle around the start, one episode of ``num_steps`` per goal.
 
     Default: 8 goals on a 2 m circle at 0, 45, ..., 315 deg (``angle_offset`` rad turns them), 30 steps each;
-    ``goals`` (``K x 2``, m) replaces the circle.
+    ``goals`` (``K x 2``, m) replaces the circle. With ``targets_seed`` the ``num_goals`` goals are drawn from it
+    instead: directions one in each of ``num_goals`` equal sectors, uniform within it, in a random order
+    (:func:`_spread_angles`), distances uniform within ``radius`` x (1 -+ ``radius_spread``), so the training goals
+    and the held-out ones come from one distribution (``docs/tasks.md``, fair held-out targets).
 
     Training split: every other goal (0, 2, 4, ...; for the default 8 goals those on the x and y axes).
+
+        >>> task = GoalReaching(radius=2.0, radius_spread=0.25, targets_seed=45)
+        >>> len(task.goals), bool(((task.goals.norm(dim=-1) >= 1.5) & (task.goals.norm(dim=-1) <= 2.5)).all())
+        (8, True)
     """
 
     kind = "goal_reaching"
     figures = ("paths", "gait")
 
     def __init__(self, radius: float = 2.0, num_goals: int = 8, num_steps: int = 30, angle_offset: float = 0.0,
-                 goals: Sequence[Sequence[float]] | None = None, name: str | None = None):
+                 goals: Sequence[Sequence[float]] | None = None, targets_seed: int | None = None,
+                 radius_spread: float = 0.25, name: str | None = None):
         super().__init__(name)
+        if goals is None and targets_seed is not None:
+            radius = _number("radius", radius, positive=True)
+            spread = _number("radius_spread", radius_spread)
+            if not 0 <= spread < 1:
+                raise ValueError(f"radius_spread must be in [0, 1), got {radius_spread!r}")
+            count = _whole("num_goals", num_goals, 1)
+            rng = np.random.default_rng(_whole("targets_seed", targets_seed, 0))
+            angles = _spread_angles(rng, count)
+            radii = rng.uniform(radius * (1 - spread), radius * (1 + spread), count)
+            goals = np.stack([radii * np.cos(angles), radii * np.sin(angles)], -1)
         if goals is None:
             radius = _number("radius", radius, positive=True)
             num_goals = _whole("num_goals", num_goals, 1)
@@ -416,6 +465,35 @@ def s_path(num_points: int = 2001) -> np.ndarray:
     return np.concatenate([first, second[1:]])
 
 
+def random_path(seed: int, *, length_m: float = 8.0, max_curvature_per_m: float = 1.0, knot_spacing_m: float = 0.5,
+                num_points: int = 2001) -> np.ndarray:
+    """``num_points x 2`` points (m) of a random smooth path from the origin, leaving along +y (the robots' start
+    heading): its curvature is drawn uniformly in ``[-max_curvature_per_m, max_curvature_per_m]`` at knots every
+    ``knot_spacing_m`` of arc length (from ``seed``) and interpolated linearly between them, so every stretch of it
+    comes from one distribution: its first half (a model-free baseline's training split) is no mirror of its second
+    (``docs/tasks.md``, fair held-out targets).
+
+        >>> path = random_path(45, length_m=6.0)
+        >>> path.shape, bool(np.allclose(path[0], 0.0))
+        ((2001, 2), True)
+        >>> round(float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum()), 3)
+        6.0
+    """
+    length_m = _number("length_m", length_m, positive=True)
+    max_curvature_per_m = _number("max_curvature_per_m", max_curvature_per_m)
+    knot_spacing_m = _number("knot_spacing_m", knot_spacing_m, positive=True)
+    rng = np.random.default_rng(_whole("seed", seed, 0))
+    knots = np.arange(0.0, length_m + knot_spacing_m, knot_spacing_m)
+    curvature_knots = rng.uniform(-abs(max_curvature_per_m), abs(max_curvature_per_m), len(knots))
+    arc = np.linspace(0.0, length_m, num_points)
+    curvature = np.interp(arc, knots, curvature_knots)
+    step = np.diff(arc)
+    heading = START_YAW + np.concatenate([[0.0], np.cumsum(0.5 * (curvature[1:] + curvature[:-1]) * step)])
+    middle = 0.5 * (heading[1:] + heading[:-1])  # the heading over each step (midpoint rule: lengths are exact)
+    moves = np.stack([np.cos(middle), np.sin(middle)], -1) * step[:, None]
+    return np.concatenate([np.zeros((1, 2)), np.cumsum(moves, axis=0)])
+
+
 @TASKS.register("trajectory_tracking")
 class TrajectoryTracking(Task):
     """Follow a reference point moving along ``path`` (default the S path) at ``speed`` m/s.
@@ -424,14 +502,20 @@ class TrajectoryTracking(Task):
     distance to the end of the path; :meth:`path_distance` gives the distance from the CoM to the path, reported per
     episode by :meth:`extra_metrics` as ``path_distance`` (the mean over the CoM path, m).
 
+    ``path_seed`` replaces the S path by :func:`random_path` (``path_length_m`` long, curvature up to
+    ``max_curvature_per_m``), whose halves come from one distribution (``docs/tasks.md``, fair held-out targets).
+
     Training split: the first half of the path's points, at the same speed, with the same ``extra_steps``.
     """
 
     kind = "trajectory_tracking"
 
     def __init__(self, path: np.ndarray | None = None, speed: float = 0.1, extra_steps: int = 10,
+                 path_seed: int | None = None, path_length_m: float = 8.0, max_curvature_per_m: float = 1.0,
                  name: str | None = None):
         super().__init__(name)
+        if path is None and path_seed is not None:
+            path = random_path(path_seed, length_m=path_length_m, max_curvature_per_m=max_curvature_per_m)
         points = s_path() if path is None else _points("path", path, "(x, y) points in m", min_points=2)
         if not np.linalg.norm(np.diff(points, axis=0), axis=1).sum() > 0:
             raise ValueError("path must be finite points (m) with a positive length")

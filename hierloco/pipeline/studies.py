@@ -28,6 +28,7 @@ Example:
 from __future__ import annotations
 
 import contextlib
+import math
 import io
 import json
 import os
@@ -420,6 +421,29 @@ def _from_records(job: Job, records: str | None, specs) -> tuple[Path, dict] | N
     return None
 
 
+def _measured(row: dict) -> dict:
+    """``row`` without the metrics it does not have (``None`` or NaN: a table of several tasks fills a column one
+    task lacks, such as a goal's ``path_distance``, with NaN), so a record and its run's evaluations compare by what
+    was measured."""
+    def missing(value) -> bool:
+        return value is None or value == "nan" or (isinstance(value, float) and math.isnan(value))
+
+    return {name: value for name, value in row.items() if not missing(value)}
+
+
+def _same_value(a, b) -> bool:
+    """Two values of a row are the same: equal labels, or numbers equal to 1e-9 relative (a metric re-derived from
+    the recorded CoM paths may differ in its last digits from one BLAS thread count to another; an edit does not)."""
+    numbers = (int, float)
+    if isinstance(a, numbers) and isinstance(b, numbers) and not isinstance(a, bool) and not isinstance(b, bool):
+        return math.isclose(a, b, rel_tol=1e-9, abs_tol=1e-12)
+    return job_records.canonical(a) == job_records.canonical(b)
+
+
+def _same_row(a: dict, b: dict) -> bool:
+    return set(a) == set(b) and all(_same_value(a[name], b[name]) for name in a)
+
+
 def _check_with_run(job: Job, specs, record: dict, where: Path) -> None:
     """Refuses ``record`` when its rows differ from those derived from the evaluations its job's run directory holds
     with today's keys (none there: nothing to compare)."""
@@ -438,15 +462,15 @@ def _check_with_run(job: Job, specs, record: dict, where: Path) -> None:
     if not present:
         return
     order = lambda row: (str(row.get("setting")), str(row.get("task")), row.get("episode", 0))  # noqa: E731
-    derived = sorted(evaluation_rows(job.run_dir, present), key=order)
+    derived = sorted((_measured(row) for row in evaluation_rows(job.run_dir, present)), key=order)
     groups = {(row["setting"], row["task"]) for row in derived}
-    held = sorted((row for row in record["rows"] if (row.get("setting"), row.get("task")) in groups), key=order)
-    if job_records.canonical(held) == job_records.canonical(derived):
+    held = sorted((_measured(row) for row in record["rows"] if (row.get("setting"), row.get("task")) in groups),
+                  key=order)
+    if len(held) == len(derived) and all(_same_row(there, here) for there, here in zip(derived, held)):
         return
     first = f"{len(derived)} rows there, {len(held)} in the record"
     for there, here in zip(derived, held):
-        differ = [name for name in sorted(set(there) | set(here))
-                  if job_records.canonical(there.get(name)) != job_records.canonical(here.get(name))]
+        differ = [name for name in sorted(set(there) | set(here)) if not _same_value(there.get(name), here.get(name))]
         if differ:
             first = (f"{there.get('setting')}/{there.get('task')} episode {there.get('episode')}: " + ", ".join(
                 f"{name} {there.get(name)!r} there, {here.get(name)!r} in the record" for name in differ[:2]))[:300]

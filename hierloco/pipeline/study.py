@@ -123,14 +123,25 @@ def run_study(cfg, jobs: Sequence[Job]) -> list[JobResult]:
                     dry_run=bool(cfg.get("dry_run", False)))
 
 
+def chosen_targets() -> str:
+    """The study's choice in the ``targets`` config group (``paper``, ``fair``: ``docs/tasks.md``), for a study whose
+    config composes it (the comparison); ``paper`` otherwise, or outside a Hydra run."""
+    from hydra.core.hydra_config import HydraConfig
+
+    if not HydraConfig.initialized():
+        return "paper"
+    return HydraConfig.get().runtime.choices.get("targets") or "paper"
+
+
 def main_tasks(cfg) -> tuple[str, ...]:
     """The tasks a study tabulates: ``tasks`` when the study's config names them, else the main tasks
-    (``eval.tasks``) of the LAT recipe at the study's preset."""
+    (``eval.tasks``) of the LAT recipe at the study's preset and targets (:func:`chosen_targets`)."""
     if cfg.get("tasks"):
         return tuple(cfg.tasks)
     from hierloco.pipeline.config import compose_recipe
 
-    return tuple(compose_recipe("lat", [f"preset={cfg.get('preset_name', 'paper')}"]).eval.tasks)
+    chosen = [f"targets={chosen_targets()}"] if chosen_targets() != "paper" else []
+    return tuple(compose_recipe("lat", [f"preset={cfg.get('preset_name', 'paper')}", *chosen]).eval.tasks)
 
 
 def missing_markdown(results: Sequence[JobResult]) -> str:

@@ -23,7 +23,7 @@ from hierloco.io import write_text
 from hierloco.pipeline import studies
 from hierloco.pipeline.config import ConfigError, as_lists
 from hierloco.pipeline.study import (
-    end_study, main_tasks, method_problems, rows_of, run_study, seed_problems, study_main, study_robots,
+    chosen_targets, end_study, main_tasks, method_problems, rows_of, run_study, seed_problems, study_main, study_robots,
     write_tables,
 )
 from hierloco.recipes.compare import paper_check
@@ -108,20 +108,26 @@ def jobs(cfg, robots) -> list:
             recipe, variant = studies.resolve_method(method, cfg.variants)
             for seed in seeds_of(cfg, method):
                 planned.append(comparison_job(method, spec, seed, preset=cfg.preset_name, settings=settings,
-                                              recipe=recipe, overrides=[*generalization, *variant, *cfg.overrides,
-                                                                        *cfg.method_overrides.get(method, [])]))
+                                              recipe=recipe, targets=chosen_targets(),
+                                              overrides=[*generalization, *variant, *cfg.overrides,
+                                                         *cfg.method_overrides.get(method, [])]))
     return planned
 
 
 def comparison_job(method: str, spec, seed: int, *, preset: str, settings, recipe: str | None = None,
-                   overrides=("eval.generalization=null",)) -> studies.Job:
+                   targets: str = "paper", overrides=("eval.generalization=null",)) -> studies.Job:
     """The comparison's job of ``method`` on the robot ``spec`` (a :class:`hierloco.envs.robots.spec.RobotSpec`) with
     ``seed``: its run directory ``outputs/<method>/<preset>/<robot>_seed<seed>`` and its overrides, so other studies
-    (the sample-efficiency study's full budgets) name the same job and take its run or record."""
-    run_dir = Path("outputs") / method / preset / f"{spec.name}_seed{seed}"
+    (the sample-efficiency study's full budgets) name the same job and take its run or record. ``targets`` other
+    than the paper's (``fair``, ``docs/tasks.md``) is the recipes' ``targets=`` and a run directory of its own,
+    ``outputs/<method>/<preset>_<targets>/...``, beside the paper targets' run."""
+    folder = preset if targets == "paper" else f"{preset}_{targets}"
+    run_dir = Path("outputs") / method / folder / f"{spec.name}_seed{seed}"
+    chosen = [] if targets == "paper" else [f"targets={targets}"]
     return studies.Job(recipe or method, str(run_dir),
                        [f"preset={preset}", f"robot={spec.reference}", f"seed={seed}",
-                        f"settings=[{','.join(settings)}]", "progress=false", *overrides], labels={"method": method})
+                        f"settings=[{','.join(settings)}]", "progress=false", *chosen, *overrides],
+                       labels={"method": method})
 
 
 @study_main(__file__)
