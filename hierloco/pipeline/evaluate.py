@@ -34,6 +34,7 @@ import hashlib
 import os
 import re
 import sys
+from collections.abc import Mapping
 from pathlib import Path
 
 from hierloco.pipeline.errors import EXIT_INTERRUPTED, EXIT_USER_ERROR, ConfigError, one_line
@@ -196,6 +197,49 @@ def check_import_paths_given(cfg, overrides: list[str], run_dir: str, trusted=()
                           f"add trust_imports={paths} to the command line, or choose a registered name")
 
 
+def terrain_files(value, trail: str = "") -> dict[str, str]:
+    """The terrain files a config names, ``dotted key -> path``: every ``terrain`` (the run's, ``eval.terrain``, a
+    task's own) that is a file (``ground.png``, ``scene.xml``) or a mapping with a ``path``.
+
+        >>> terrain_files({"terrain": {"name": "heightmap", "path": "g.png"}, "eval": {"terrain": "s.xml"}})
+        {'terrain.path': 'g.png', 'eval.terrain': 's.xml'}
+    """
+    found = {}
+    if isinstance(value, Mapping):
+        for key, item in value.items():
+            dotted = f"{trail}.{key}" if trail else str(key)
+            if key == "terrain" and isinstance(item, str) and os.path.splitext(item)[1].lower() in (".png", ".xml"):
+                found[dotted] = item
+            elif key == "terrain" and isinstance(item, Mapping) and isinstance(item.get("path"), str):
+                found[f"{dotted}.path"] = item["path"]
+            else:
+                found.update(terrain_files(item, dotted))
+    return found
+
+
+def check_terrain_files_given(cfg, overrides: list[str], run_dir: str) -> None:
+    """Refuses, in one line, a terrain file that the run's own ``config.yaml`` names outside the run directory and
+    the command line does not name again: a received run directory reads no file of this machine on its own word
+    (a file inside the run directory, which came with it, is read)."""
+    from omegaconf import OmegaConf
+
+    typed = " ".join(overrides)
+    root = Path(run_dir).resolve()
+    received = {}
+    for dotted, path in terrain_files(OmegaConf.to_container(cfg, resolve=False)).items():
+        if path in typed:
+            continue
+        resolved = Path(os.path.expanduser(path)).resolve()
+        if resolved != root and root not in resolved.parents:
+            received[dotted] = path
+    if received:
+        listed = " ".join(f"{dotted}={path}" for dotted, path in received.items())
+        raise ConfigError(f"{Path(run_dir) / 'config.yaml'} names the terrain file{'s' if len(received) > 1 else ''} "
+                          f"{listed} outside the run directory: a run directory's files never name a file of this "
+                          "machine to read; give it on the command line (the same override), or put the file in the "
+                          "run directory")
+
+
 def method_of(run_dir: str):
     """The :class:`hierloco.pipeline.methods.Method` that made ``run_dir`` (its ``run.json``)."""
     import json
@@ -241,6 +285,7 @@ def evaluate(cfg, overrides: list[str], folder: str | None = None) -> float:
         cfg.run_dir = run_dir
     method = method_of(run_dir)
     check_import_paths_given(cfg, overrides, run_dir, trusted)
+    check_terrain_files_given(cfg, overrides, run_dir)
     trained = trained_config(run_dir).get("device", "cpu")
     with open_dict(cfg):
         if str(cfg.get("device")) != str(trained):  # evaluated elsewhere: the trained stages keep their keys

@@ -314,3 +314,34 @@ def test_foreign_artifacts_are_what_the_plan_does_not_make(tmp_path):
     os.symlink(tmp_path, tmp_path / "run" / "up")
     with pytest.raises(RunDirectoryError, match=r"symbolic links that lead out of it \(up\)"):
         run.verify([])
+
+
+def test_evaluate_reads_no_terrain_file_a_received_config_names_outside_its_run_directory(copy_run, tmp_path):
+    """A received ``config.yaml`` whose evaluations name a terrain file elsewhere on this machine is refused in one
+    line before anything is read or written; named again on the command line, or shipped inside the run directory,
+    the file is read (and its evaluation runs)."""
+    import numpy as np
+    from matplotlib import pyplot
+
+    ground = tmp_path / "elsewhere" / "ground.png"
+    ground.parent.mkdir()
+    pyplot.imsave(ground, np.zeros((8, 8)), cmap="gray")
+    cfg = OmegaConf.load(copy_run / "config.yaml")
+    OmegaConf.update(cfg, "eval.terrain", {"name": "heightmap", "path": str(ground), "height_m": 0.01}, merge=False)
+    OmegaConf.save(cfg, copy_run / "config.yaml")
+    before = snapshot(copy_run)
+    tiny = ("eval.videos=[]", "eval.figures=false", "eval.generalization=null",
+            "++eval.tasks={goal_reaching: {radius: 0.6, num_steps: 2, num_goals: 1}}")
+    result = run_in_process("evaluate.py", f"run_dir={copy_run}", "name=ground", *tiny)
+    assert result.returncode == 2 and len(result.lines) == 1, result.stderr
+    assert f"eval.terrain.path={ground}" in result.lines[0] and "outside the run directory" in result.lines[0]
+    assert snapshot(copy_run) == before
+
+    again = run_in_process("evaluate.py", f"run_dir={copy_run}", "name=ground", *tiny, f"eval.terrain.path={ground}")
+    assert again.returncode == 0, again.stderr[-2000:]
+    shipped = copy_run / "ground.png"
+    shipped.write_bytes(ground.read_bytes())
+    OmegaConf.update(cfg, "eval.terrain.path", str(shipped), merge=False)
+    OmegaConf.save(cfg, copy_run / "config.yaml")
+    inside = run_in_process("evaluate.py", f"run_dir={copy_run}", "name=shipped", *tiny)
+    assert inside.returncode == 0, inside.stderr[-2000:]
