@@ -38,6 +38,7 @@ from hierloco.envs.robots.check import (
     standing_statics,
 )
 from hierloco.envs.robots.check.__main__ import main, report_lines
+from tests.envs.robot_yaml import changed_copy
 from tests.runner import run_in_process
 
 FIXTURES = Path(__file__).resolve().parents[2] / "tests" / "fixtures"
@@ -46,18 +47,8 @@ QUADRUPED20 = FIXTURES / "quadruped20" / "quadruped20.yaml"
 
 
 def _copy(directory: Path, **changes) -> Path:
-    """A copy of the no-limit fixture's YAML in ``directory`` (its MJCF by absolute path), some keys changed (a
-    value of ``None`` removes the key)."""
-    content = yaml.safe_load(NOLIMIT.read_text())
-    content["mjcf"] = str(NOLIMIT.parent / content["mjcf"])
-    for key, value in changes.items():
-        if value is None:
-            content.pop(key, None)
-        else:
-            content[key] = value
-    path = directory / "robot.yaml"
-    path.write_text(yaml.safe_dump(content, sort_keys=False))
-    return path
+    """A copy of the no-limit fixture's YAML in ``directory``, some keys changed (``None`` removes one)."""
+    return changed_copy(NOLIMIT, directory, **changes)
 
 
 def test_a_file_without_torque_limits_is_refused_in_one_line_that_names_torque_limit_and_the_check(tmp_path):

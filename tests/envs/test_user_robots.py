@@ -41,6 +41,7 @@ from hierloco.envs.robots import (
 )
 from hierloco.envs.locomotion import FOOT_CONTACT_FORCE
 from hierloco.envs.robots.yaml_robot import KEY_TYPES, REQUIRED_KEYS
+from tests.envs.robot_yaml import changed_copy
 from tests.envs.toy_robot import make_toy_robot
 
 REPO = Path(__file__).resolve().parents[2]
@@ -69,18 +70,8 @@ def _fixture_kwargs(**changes) -> dict:
 
 
 def _write_yaml(directory: Path, **changes) -> Path:
-    """A copy of the fixture's YAML in ``directory`` (MJCF by absolute path), with some keys changed (``None``
-    deletes a key)."""
-    content = yaml.safe_load(FIXTURE_YAML.read_text())
-    content["mjcf"] = str(FIXTURE_XML)
-    for key, value in changes.items():
-        if value is None:
-            content.pop(key, None)
-        else:
-            content[key] = value
-    path = directory / "robot.yaml"
-    path.write_text(yaml.safe_dump(content, sort_keys=False))  # leg order is mapping order
-    return path
+    """A copy of the fixture's YAML in ``directory``, with some keys changed (``None`` deletes a key)."""
+    return changed_copy(FIXTURE_YAML, directory, **changes)
 
 
 # ---------------------------------------------------------------------------------------------------- YAML
