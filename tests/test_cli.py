@@ -92,3 +92,31 @@ def test_the_recipes_are_part_of_the_package():
 
     assert Path(hierloco.recipes.__file__).parent == ROOT / "hierloco" / "recipes"
     assert (Path(next(iter(hierloco.recipes.conf.__path__))) / "preset" / "tiny.yaml").is_file()
+
+
+def refuses_bad_seeds_and_cores(names, folder) -> None:
+    hierloco = [sys.executable, "-m", "hierloco.cli", "study"]
+    for name in names:
+        for override, said in (("ray.cores_per_job=0", "ray.cores_per_job must be an integer >= 1, got 0"),
+                               ("seeds=[-1]", "seed -1 is not an integer >= 0")):
+            done = subprocess.run([*hierloco, name, override, "dry_run=true", f"out_dir={folder}"], cwd=folder,
+                                  capture_output=True, text=True, timeout=120)
+            if override.startswith("seeds") and "Could not override 'seeds'" in done.stderr:
+                continue  # a study without seeds (the tuning of IK's law runs its own)
+            lines = done.stderr.strip().splitlines()
+            assert done.returncode == 2 and len(lines) == 1 and said in lines[0], (name, override, done.stderr[-500:])
+    assert not list(Path(folder).iterdir())
+
+
+def test_a_study_refuses_a_bad_seed_and_cores_per_job_in_one_line_before_any_work(tmp_path):
+    """A negative seed and a ``ray.cores_per_job`` below 1 are one line, exit status 2, nothing written (the damage
+    study ran seed -1's jobs before; most studies did not check the cores)."""
+    refuses_bad_seeds_and_cores(["adverse", "ablations"], tmp_path)
+
+
+@pytest.mark.slow
+def test_every_study_refuses_a_bad_seed_and_cores_per_job_in_one_line_before_any_work(tmp_path):
+    """As above, for every registered study (a study without ``seeds`` is checked for the cores alone)."""
+    from hierloco.pipeline.methods import STUDIES
+
+    refuses_bad_seeds_and_cores(STUDIES.names(), tmp_path)

@@ -116,11 +116,26 @@ def ray_address(cfg) -> str | None:
 def run_study(cfg, jobs: Sequence[Job]) -> list[JobResult]:
     """Runs ``jobs`` with the study config's Ray options (``ray.address`` or ``RAY_ADDRESS``, ``ray.cores_per_job``,
     ``ray.gpus_per_job``, ``ray.fetch_run_dirs``), ``records`` and ``dry_run``."""
+    refuse(ray_problems(cfg))
     ray = cfg.get("ray") or {}
     return run_jobs(jobs, address=ray_address(cfg), cores_per_job=ray.get("cores_per_job"),
                     gpus_per_job=ray.get("gpus_per_job", 0),
                     fetch_run_dirs=bool(ray.get("fetch_run_dirs", False)), records=cfg.get("records"),
                     dry_run=bool(cfg.get("dry_run", False)))
+
+
+def refuse(problems: Sequence[str]) -> None:
+    """Raises one :class:`ConfigError` naming every problem (each once, in order), when there are any: a study's
+    config check ends with it, before any work."""
+    if problems:
+        raise ConfigError("bad config: " + "; ".join(dict.fromkeys(problems)))
+
+
+def ray_problems(cfg) -> list[str]:
+    """A problem when the study's ``ray.cores_per_job`` is not an integer >= 1."""
+    cores = (cfg.get("ray") or {}).get("cores_per_job", 1)
+    return [] if isinstance(cores, int) and not isinstance(cores, bool) and cores >= 1 else [
+        f"ray.cores_per_job must be an integer >= 1, got {cores!r}"]
 
 
 def chosen_targets() -> str:

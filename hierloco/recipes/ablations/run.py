@@ -17,8 +17,8 @@ from pathlib import Path
 
 from hierloco.io import write_text
 from hierloco.pipeline import studies
-from hierloco.pipeline.config import ConfigError, as_lists
-from hierloco.pipeline.study import end_study, run_study, study_main, write_tables
+from hierloco.pipeline.config import as_lists
+from hierloco.pipeline.study import end_study, refuse, run_study, study_main, write_tables
 from hierloco.recipes.ablations import paper_check
 
 
@@ -43,8 +43,7 @@ def check(cfg) -> None:
             problems.append(str(error))
     problems += [f"unknown ablation {name!r} in run (ablations: {', '.join(cfg.ablations)})" for name in cfg.run
                  if name not in cfg.ablations]
-    if problems:
-        raise ConfigError("bad config: " + "; ".join(problems))
+    refuse(problems)
 
 
 def jobs(cfg) -> tuple[list, list]:

@@ -21,9 +21,9 @@ from hierloco.io import write_text
 from hierloco.plots import plot_samples
 from hierloco.results import EPISODE_COLUMNS, csv_text, markdown_table
 from hierloco.pipeline import studies
-from hierloco.pipeline.config import ConfigError, SETTINGS, as_lists
+from hierloco.pipeline.config import SETTINGS, as_lists
 from hierloco.pipeline.study import (
-    end_study, main_tasks, method_problems, run_study, seed_problems, study_main, study_robots,
+    end_study, main_tasks, method_problems, refuse, run_study, seed_problems, study_main, study_robots,
 )
 
 def check(cfg) -> list:
@@ -49,10 +49,10 @@ def check(cfg) -> list:
             continue
         problems += [f"profile_overrides.{profile} names {m!r}, which is not in methods" for m in per_method
                      if m not in cfg.methods]
+    problems += seed_problems(cfg.seeds)
     problems += [f"samples must be integers >= 10, got {n!r}" for n in cfg.samples if not (isinstance(n, int) and
                                                                                            n >= 10)]
-    if problems:
-        raise ConfigError("bad config: " + "; ".join(problems))
+    refuse(problems)
     return robots
 
 

@@ -23,8 +23,8 @@ from hierloco.io import write_text
 from hierloco.pipeline import studies
 from hierloco.pipeline.config import ConfigError, as_lists
 from hierloco.pipeline.study import (
-    chosen_targets, end_study, main_tasks, method_problems, rows_of, run_study, seed_problems, study_main, study_robots,
-    write_tables,
+    chosen_targets, end_study, main_tasks, method_problems, ray_problems, refuse, rows_of, run_study, seed_problems,
+    study_main, study_robots, write_tables,
 )
 from hierloco.recipes.compare import paper_check
 
@@ -46,8 +46,7 @@ def check(cfg) -> list:
         else:
             problems += [f"method_seeds.{method}: seed {s!r} is not an integer >= 0" for s in seeds
                          if not (isinstance(s, int) and s >= 0)]
-    if not (isinstance(cfg.ray.cores_per_job, int) and cfg.ray.cores_per_job >= 1):
-        problems.append(f"ray.cores_per_job must be an integer >= 1, got {cfg.ray.cores_per_job!r}")
+    problems += ray_problems(cfg)
     if cfg.causes is not None:
         try:
             paper_check.load_causes(cfg.causes)
@@ -56,8 +55,7 @@ def check(cfg) -> list:
     problems += name_problems(cfg.names, cfg.methods)
     if not isinstance(cfg.generalization, bool):
         problems.append(f"generalization must be true or false, got {cfg.generalization!r}")
-    if problems:
-        raise ConfigError("bad config: " + "; ".join(problems))
+    refuse(problems)
     return robots
 
 

@@ -20,9 +20,9 @@ import numpy as np
 
 from hierloco.io import write_text
 from hierloco.pipeline import studies
-from hierloco.pipeline.config import ConfigError, as_lists
+from hierloco.pipeline.config import as_lists
 from hierloco.pipeline.study import (
-    end_study, main_tasks, rows_of, run_study, seed_problems, study_main, study_robots, write_tables,
+    end_study, main_tasks, refuse, rows_of, run_study, seed_problems, study_main, study_robots, write_tables,
 )
 
 
@@ -41,8 +41,7 @@ def check(cfg) -> list:
     transitions = cfg.get("calibration_transitions")
     if isinstance(transitions, bool) or not (isinstance(transitions, int) and transitions >= 0):
         problems.append(f"calibration_transitions must be an integer >= 0, got {transitions!r}")
-    if problems:
-        raise ConfigError("bad config: " + "; ".join(problems))
+    refuse(problems)
     return robots
 
 

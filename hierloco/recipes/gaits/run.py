@@ -42,7 +42,7 @@ from hierloco.io import write_text
 from hierloco.pipeline import studies
 from hierloco.pipeline.config import ConfigError, as_lists, override_value
 from hierloco.pipeline.study import (
-    end_study, main_tasks, missing_markdown, run_study, seed_problems, study_main, study_robots, write_tables,
+    end_study, main_tasks, missing_markdown, refuse, run_study, seed_problems, study_main, study_robots, write_tables,
 )
 from hierloco.recipes.compare.run import comparison_job
 
@@ -78,8 +78,7 @@ def check(cfg):
     tag = cfg.get("tag")
     if tag is not None and not (isinstance(tag, str) and tag.replace("_", "").isalnum() and tag.isascii()):
         problems.append(f"tag must be letters, digits and underscores (it names the run directories), got {tag!r}")
-    if problems:
-        raise ConfigError("bad config: " + "; ".join(problems))
+    refuse(problems)
     return robots[0]
 
 

@@ -24,7 +24,7 @@ from hierloco.io import write_text
 from hierloco.results import EPISODE_COLUMNS, csv_text, markdown_table
 from hierloco.pipeline import studies
 from hierloco.pipeline.config import ConfigError, as_lists
-from hierloco.pipeline.study import end_study, method_problems, missing_markdown, run_study, study_main
+from hierloco.pipeline.study import end_study, method_problems, missing_markdown, refuse, run_study, study_main
 
 SETTINGS = ("normal", "hardware_unadapted", "hardware")
 LABELS = {"normal": "nominal robot", "hardware_unadapted": "perturbed, nominal model",
@@ -50,8 +50,7 @@ def check(cfg) -> tuple[list, dict]:
     for key in ("num_experts", "num_transitions"):
         if not (isinstance(cfg[key], int) and cfg[key] >= 10):
             problems.append(f"{key} must be an integer >= 10, got {cfg[key]!r}")
-    if problems:
-        raise ConfigError("bad config: " + "; ".join(dict.fromkeys(problems)))  # a bad option once, not per robot
+    refuse(problems)
     return robots, options
 
 

@@ -20,7 +20,7 @@ import numpy as np
 from hierloco.io import write_text
 from hierloco.pipeline import studies
 from hierloco.pipeline.config import ConfigError, as_lists, override_value
-from hierloco.pipeline.study import end_study, missing_markdown, run_study, seed_problems, study_main, study_robots
+from hierloco.pipeline.study import end_study, missing_markdown, refuse, run_study, seed_problems, study_main, study_robots
 
 STAGE = "latent_continuity"  # the stage (hierloco.pipeline.stages.latent_continuity_stage) whose report is read
 COLUMNS = ["robot", "seed", "latent_dim", "grid", "neighbour_difference", "pair_difference", "ratio",
@@ -43,8 +43,7 @@ def check(cfg) -> list:
     else:
         problems += [f"robot_overrides.{name} must be a list of overrides, got {value!r}" for name, value
                      in extra.items() if isinstance(value, str) or not hasattr(value, "__iter__")]
-    if problems:
-        raise ConfigError("bad config: " + "; ".join(dict.fromkeys(problems)))
+    refuse(problems)
     return robots
 
 

@@ -24,7 +24,7 @@ import numpy as np
 from hierloco.io import write_text
 from hierloco.pipeline import studies
 from hierloco.pipeline.config import ConfigError, as_lists, override_value
-from hierloco.pipeline.study import end_study, missing_markdown, run_study, seed_problems, study_main, study_robots
+from hierloco.pipeline.study import end_study, missing_markdown, refuse, run_study, seed_problems, study_main, study_robots
 
 COLUMNS = ["robot", "seed", "arena", "task", "normalized_cost", "final_error", "success", "path_distance",
            "clearance", "path_length", "inflation"]
@@ -72,8 +72,7 @@ def check(cfg) -> list:
                     make_task(options["task"], name=name, **{k: v for k, v in options.items() if k != "task"})
                 except ValueError as error:
                     problems.append(f"{spec.name} {name}: {error}")
-    if problems:
-        raise ConfigError("bad config: " + "; ".join(dict.fromkeys(problems)))
+    refuse(problems)
     return robots
 
 

@@ -26,9 +26,9 @@ import numpy as np
 
 from hierloco.io import write_text
 from hierloco.pipeline import studies
-from hierloco.pipeline.config import ConfigError, as_lists
+from hierloco.pipeline.config import as_lists
 from hierloco.pipeline.study import (
-    end_study, main_tasks, run_study, seed_problems, study_main, study_robots, write_tables,
+    end_study, main_tasks, refuse, run_study, seed_problems, study_main, study_robots, write_tables,
 )
 from hierloco.recipes.compare.run import comparison_job
 
@@ -62,8 +62,7 @@ def check(cfg) -> list:
                                 f"preset's own {full}{why}")
     if cfg.compare_records is not None and not isinstance(cfg.compare_records, str):
         problems.append(f"compare_records must be a directory path or null, got {cfg.compare_records!r}")
-    if problems:
-        raise ConfigError("bad config: " + "; ".join(problems))
+    refuse(problems)
     return robots
 
 

@@ -33,7 +33,8 @@ from hierloco.io import write_text
 from hierloco.pipeline import studies
 from hierloco.pipeline.config import ConfigError, as_lists, compose_recipe, override_value
 from hierloco.pipeline.study import (
-    end_study, method_problems, missing_markdown, run_study, seed_problems, study_main, study_robots,
+    end_study, method_problems, missing_markdown, ray_problems, refuse, run_study, seed_problems, study_main,
+    study_robots,
 )
 from hierloco.recipes.compare.run import name_problems, renamed
 
@@ -169,10 +170,8 @@ def check(cfg) -> list:
     if missing:
         problems.append(f"trained_runs must name {', '.join(missing)} (e.g. outputs/{{method}}/{cfg.preset_name}/"
                         "{robot}_seed{seed}), got " + repr(pattern))
-    if not (isinstance(cfg.ray.cores_per_job, int) and cfg.ray.cores_per_job >= 1):
-        problems.append(f"ray.cores_per_job must be an integer >= 1, got {cfg.ray.cores_per_job!r}")
-    if problems:
-        raise ConfigError("bad config: " + "; ".join(dict.fromkeys(problems)))
+    problems += ray_problems(cfg)
+    refuse(problems)
     return robots
 
 

@@ -30,7 +30,7 @@ from hierloco.io import write_text
 from hierloco.results import EPISODE_COLUMNS, csv_text
 from hierloco.pipeline import studies
 from hierloco.pipeline.config import ConfigError, as_lists
-from hierloco.pipeline.study import end_study, missing_markdown, run_study, seed_problems, study_main, study_robots
+from hierloco.pipeline.study import end_study, missing_markdown, refuse, run_study, seed_problems, study_main, study_robots
 from hierloco.claims import seed_means
 
 
@@ -53,8 +53,7 @@ def check(cfg) -> list:
     problems += seed_problems(cfg.seeds)
     if not cfg.tasks:
         problems.append("tasks is empty")
-    if problems:
-        raise ConfigError("bad config: " + "; ".join(problems))
+    refuse(problems)
     return robots
 
 
