@@ -187,12 +187,17 @@ def _open_lock(lock: Path, flags: int) -> int:
 
 def outward_links(root: Path) -> list[str]:
     """The symbolic links under ``root`` (relative paths) that lead out of it or nowhere; links that stay inside
-    (a tracker's ``latest-run``) are not listed."""
+    (a tracker's ``latest-run``) are not listed, nor the links to files that Weights & Biases makes in its own run
+    folder (``logs/<run>/wandb/...``: its ``debug-core.log`` leads to the log of its service in the user's cache),
+    which hierloco never writes through (a run's logs go to a folder of its own)."""
     top = root.resolve()
     found = []
     for folder, directories, files in os.walk(root):
         for name in directories + files:
             path = Path(folder, name)
+            parts = path.relative_to(root).parts
+            if name in files and parts[0] == "logs" and "wandb" in parts[1:-1]:
+                continue
             if path.is_symlink():
                 try:
                     target = path.resolve(strict=True)

@@ -345,3 +345,26 @@ def test_evaluate_reads_no_terrain_file_a_received_config_names_outside_its_run_
     OmegaConf.save(cfg, copy_run / "config.yaml")
     inside = run_in_process("evaluate.py", f"run_dir={copy_run}", "name=shipped", *tiny)
     assert inside.returncode == 0, inside.stderr[-2000:]
+
+
+def test_the_file_links_wandb_makes_in_its_run_folder_do_not_refuse_the_run_directory(tmp_path):
+    """Weights & Biases (offline, the paper preset's logger) links ``debug-core.log`` in its run folder to its
+    service's log in the user's cache: the run directory hierloco made is used again (``hierloco evaluate`` refused
+    it). A link to a folder there, or a file link anywhere else, is still refused."""
+    from hierloco.pipeline.rundir import RunDirectory, RunDirectoryError
+
+    outside = tmp_path / "cache" / "core-debug.log"
+    outside.parent.mkdir()
+    outside.write_text("")
+    run = RunDirectory(tmp_path / "run")
+    wandb_logs = tmp_path / "run" / "logs" / "lat_a1_0" / "wandb" / "offline-run-1" / "logs"
+    wandb_logs.mkdir(parents=True)
+    os.symlink(outside, wandb_logs / "debug-core.log")
+    assert run.verify([]) == {}
+    os.symlink(outside.parent, wandb_logs / "cache")
+    with pytest.raises(RunDirectoryError, match=r"lead out of it \(logs/lat_a1_0/wandb/offline-run-1/logs/cache\)"):
+        run.verify([])
+    (wandb_logs / "cache").unlink()
+    os.symlink(outside, tmp_path / "run" / "logs" / "lat_a1_0" / "metrics.csv")
+    with pytest.raises(RunDirectoryError, match=r"lead out of it \(logs/lat_a1_0/metrics.csv\)"):
+        run.verify([])
