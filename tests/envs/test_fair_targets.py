@@ -81,9 +81,9 @@ def test_a_random_path_s_halves_are_no_mirror_of_each_other_where_the_s_path_s_a
 
 
 def test_the_harder_path_lasts_its_length_over_its_speed():
-    task = make_task("trajectory_tracking", path_seed=4504, path_length_m=6.0, max_curvature_per_m=1.5, speed=0.2,
+    task = make_task("trajectory_tracking", path_seed=4504, path_length_m=6.0, max_curvature_per_m=2.0, speed=0.4,
                      name="trajectory_tracking_fast")
-    assert task.num_steps == 30 + 10 and task.length == pytest.approx(6.0)
+    assert task.num_steps == 15 + 10 and task.length == pytest.approx(6.0)
     assert task.training_split().path.tolist() == task.path[: len(task.path) // 2 + 1].tolist()
 
 
