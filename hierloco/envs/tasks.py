@@ -586,7 +586,7 @@ def make_task(kind: str, /, **options) -> Task:
         ('goal_reaching_1.5m', [1.5, 1.5, 1.5, 1.5])
 
     ``make_task("goal_reaching", radus=2)`` raises ``ValueError: goal_reaching: unknown option 'radus'; valid
-    options: radius, num_goals, num_steps, angle_offset, goals, name``.
+    options: radius, num_goals, num_steps, angle_offset, goals, targets_seed, radius_spread, name``.
     """
     cls = TASKS[kind]
     if not (isinstance(cls, type) and issubclass(cls, Task)):

@@ -501,7 +501,8 @@ def test_make_task_refuses_unknown_options_naming_the_valid_ones():
         assert option in str(info.value)
     with pytest.raises(ValueError, match="unknown options 'speeed', 'pth'"):
         make_task("trajectory_tracking", speeed=1, pth=None)
-    assert task_options("velocity_tracking") == ["velocities", "steps_per_target", "rounds", "name"]
+    assert task_options("velocity_tracking") == ["velocities", "steps_per_target", "rounds", "num_random",
+                                                 "speed_range_mps", "targets_seed", "name"]
 
 
 @pytest.mark.parametrize("name, options, message", [
