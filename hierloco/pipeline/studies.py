@@ -475,9 +475,31 @@ def _check_with_run(job: Job, specs, record: dict, where: Path) -> None:
             first = (f"{there.get('setting')}/{there.get('task')} episode {there.get('episode')}: " + ", ".join(
                 f"{name} {there.get(name)!r} there, {here.get(name)!r} in the record" for name in differ[:2]))[:300]
             break
+    if _another_build(record, job.run_dir):
+        raise job_records.RecordError(
+            f"record {where}: the job's run directory {job.run_dir} holds another build of it (its stages were made "
+            f"again after the record's), whose evaluations differ from the record's rows ({first}): keep the one you "
+            "want (move the run directory away to use the record, or the record to use the run directory)")
     raise job_records.RecordError(f"record {where}: its rows differ from the evaluations in the job's run directory "
                                   f"{job.run_dir} ({first}); the record or that run directory was edited: remove the "
                                   "one you do not trust")
+
+
+def _another_build(record: dict, run_dir: str) -> bool:
+    """Whether the run directory's stages were built at other times than the record's (``builds.json`` against the
+    record's ``builds``: a stage both name with another ``finished`` time): the job was run again since, and a
+    difference in its rows is a new build's (training on another thread count differs in its last digits and
+    beyond), not an edit."""
+    try:
+        here = json.loads((Path(run_dir) / "builds.json").read_text())
+    except (OSError, ValueError):
+        return False
+    recorded = record.get("builds") or {}
+    if not isinstance(here, dict) or not isinstance(recorded, dict):
+        return False
+    return any(isinstance(here.get(name), dict) and isinstance(entry, dict)
+               and here[name].get("finished") != entry.get("finished")
+               for name, entry in recorded.items() if name in here)
 
 
 def _keep_record(records: str | None, job: Job, record: dict | None) -> None:

@@ -136,6 +136,18 @@ def test_a_record_with_a_recomputed_digest_is_checked_against_its_run_directory(
                                       "(normal/goal_reaching episode 0: normalized_cost "), result.lines
     assert snapshot(tmp_path) == before and not (tmp_path / "out").exists()
 
+    # the job made again in its run directory since the record (its stages built at other times): another build,
+    # not an edit, and the line says so
+    builds_path = tmp_path / "outputs" / "lat" / "tiny" / "a1_seed0" / "builds.json"
+    builds = json.loads(builds_path.read_text())
+    for entry in builds.values():
+        entry["finished"] = "2030-01-01T00:00:00Z"
+    builds_path.write_text(json.dumps(builds))
+    result = run_in_process("compare", "preset=tiny", "methods=[lat]", "robots=[a1]", "seeds=[0]",
+                            "settings=[normal]", f"records={store}", f"out_dir={tmp_path / 'out'}", cwd=tmp_path)
+    assert result.returncode == 2 and len(result.lines) == 1, result.stderr
+    assert "holds another build of it (its stages were made again after the record's)" in result.lines[0]
+
 
 def evaluation_specs():
     def spec(task, options=None):
