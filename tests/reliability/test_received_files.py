@@ -7,6 +7,7 @@ import json
 import os
 import sys
 import time
+from pathlib import Path
 
 import pytest
 from omegaconf import OmegaConf
@@ -316,10 +317,12 @@ def test_foreign_artifacts_are_what_the_plan_does_not_make(tmp_path):
         run.verify([])
 
 
-def test_evaluate_reads_no_terrain_file_a_received_config_names_outside_its_run_directory(copy_run, tmp_path):
-    """A received ``config.yaml`` whose evaluations name a terrain file elsewhere on this machine is refused in one
-    line before anything is read or written; named again on the command line, or shipped inside the run directory,
-    the file is read (and its evaluation runs)."""
+TINY_EVALUATION = ("eval.videos=[]", "eval.figures=false", "eval.generalization=null",
+                   "++eval.tasks={goal_reaching: {radius: 0.6, num_steps: 2, num_goals: 1}}")
+
+
+def received_terrain_file(copy_run, tmp_path) -> Path:
+    """The run's ``config.yaml`` made to name a heightmap elsewhere on this machine (as a received one may)."""
     import numpy as np
     from matplotlib import pyplot
 
@@ -329,14 +332,27 @@ def test_evaluate_reads_no_terrain_file_a_received_config_names_outside_its_run_
     cfg = OmegaConf.load(copy_run / "config.yaml")
     OmegaConf.update(cfg, "eval.terrain", {"name": "heightmap", "path": str(ground), "height_m": 0.01}, merge=False)
     OmegaConf.save(cfg, copy_run / "config.yaml")
+    return ground
+
+
+def test_evaluate_reads_no_terrain_file_a_received_config_names_outside_its_run_directory(copy_run, tmp_path):
+    """A received ``config.yaml`` whose evaluations name a terrain file elsewhere on this machine is refused in one
+    line before anything is read or written."""
+    ground = received_terrain_file(copy_run, tmp_path)
     before = snapshot(copy_run)
-    tiny = ("eval.videos=[]", "eval.figures=false", "eval.generalization=null",
-            "++eval.tasks={goal_reaching: {radius: 0.6, num_steps: 2, num_goals: 1}}")
-    result = run_in_process("evaluate.py", f"run_dir={copy_run}", "name=ground", *tiny)
+    result = run_in_process("evaluate.py", f"run_dir={copy_run}", "name=ground", *TINY_EVALUATION)
     assert result.returncode == 2 and len(result.lines) == 1, result.stderr
     assert f"eval.terrain.path={ground}" in result.lines[0] and "outside the run directory" in result.lines[0]
     assert snapshot(copy_run) == before
 
+
+@pytest.mark.slow
+def test_a_received_terrain_file_named_again_or_shipped_inside_is_read(copy_run, tmp_path):
+    """Named again on the command line, or shipped inside the run directory, the file is read and the evaluation
+    runs."""
+    ground = received_terrain_file(copy_run, tmp_path)
+    tiny = TINY_EVALUATION
+    cfg = OmegaConf.load(copy_run / "config.yaml")
     again = run_in_process("evaluate.py", f"run_dir={copy_run}", "name=ground", *tiny, f"eval.terrain.path={ground}")
     assert again.returncode == 0, again.stderr[-2000:]
     shipped = copy_run / "ground.png"
