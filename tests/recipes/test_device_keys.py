@@ -13,22 +13,14 @@ import torch
 from omegaconf import OmegaConf, open_dict
 
 from hierloco.pipeline import records, studies
-from hierloco.pipeline.config import compose_recipe, prepare
+from hierloco.pipeline.config import compose_recipe
 from hierloco.pipeline.errors import ConfigError
+from tests.recipes.stage_plans import changed, plan
 
 ROOT = Path(__file__).resolve().parents[2]
 no_gpu = pytest.mark.skipif(torch.cuda.is_available(), reason="auto resolves to cuda on this machine")
 
 
-def plan(recipe: str, *overrides: str) -> dict:
-    cfg = compose_recipe(recipe, ["preset=tiny", *overrides])
-    utils = importlib.import_module(f"hierloco.recipes.{recipe}.utils")
-    return {stage.name: stage for stage in utils.plan(cfg, prepare(cfg, utils.checks)).stages()}
-
-
-def changed(recipe: str, *overrides: str) -> set[str]:
-    before, after = plan(recipe), plan(recipe, *overrides)
-    return {name for name in before.keys() | after.keys() if before[name].digest != after[name].digest}
 
 
 @no_gpu

@@ -6,7 +6,6 @@ and a broken one is one line; the terrain study runs end to end on one robot and
 from __future__ import annotations
 
 import csv
-import importlib
 import json
 import shutil
 from pathlib import Path
@@ -14,20 +13,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hierloco.pipeline.config import compose_recipe, prepare
+from tests.recipes.stage_plans import changed, plan
 from tests.runner import run_in_process, run_subprocess
 
 
-def plan(recipe: str, *overrides: str) -> dict:
-    cfg = compose_recipe(recipe, ["preset=tiny", *overrides])
-    utils = importlib.import_module(f"hierloco.recipes.{recipe}.utils")
-    return {stage.name: stage for stage in utils.plan(cfg, prepare(cfg, utils.checks)).stages()}
-
-
-def changed(recipe: str, *overrides: str) -> set[str]:
-    before, after = plan(recipe), plan(recipe, *overrides)
-    assert before.keys() == after.keys()
-    return {name for name in before if before[name].digest != after[name].digest}
 
 
 def evaluations(stages) -> set[str]:
