@@ -155,7 +155,8 @@ def main_tasks(cfg) -> tuple[str, ...]:
         return tuple(cfg.tasks)
     from hierloco.pipeline.config import compose_recipe
 
-    chosen = [f"targets={chosen_targets()}"] if chosen_targets() != "paper" else []
+    targets = chosen_targets()
+    chosen = [f"targets={targets}"] if targets != "paper" else []
     return tuple(compose_recipe("lat", [f"preset={cfg.get('preset_name', 'paper')}", *chosen]).eval.tasks)
 
 
