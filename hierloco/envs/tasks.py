@@ -51,6 +51,7 @@ TASKS = Registry("task", context=("name",), modules=("hierloco.envs.navigation",
 W_POSITION, W_YAW = 2.0, 1.0  # [w1, w2]
 SUCCESS_RADIUS = 0.2  # m
 STEP_DURATION = 1.0  # s, one task step = one latent action of N = 100 steps at 100 Hz
+MAX_RANDOM_TARGETS = 10_000  # random velocities, or knots of a random path: a bound on what a config may ask
 
 
 def _as_tensor(x, like=None, device=None):
@@ -348,7 +349,9 @@ class VelocityTracking(Task):
                  steps_per_target: int = 5, rounds: int = 2, num_random: int = 0,
                  speed_range_mps: Sequence[float] = (0.1, 0.3), targets_seed: int = 0, name: str | None = None):
         super().__init__(name)
-        if _whole("num_random", num_random, 0):
+        if _whole("num_random", num_random, 0) > MAX_RANDOM_TARGETS:
+            raise ValueError(f"num_random must be at most {MAX_RANDOM_TARGETS}, got {num_random!r}")
+        if num_random:
             low, high = _range("speed_range_mps", speed_range_mps)
             rng = np.random.default_rng(_whole("targets_seed", targets_seed, 0))
             headings, speeds = _spread_angles(rng, num_random), rng.uniform(low, high, num_random)
@@ -482,6 +485,9 @@ def random_path(seed: int, *, length_m: float = 8.0, max_curvature_per_m: float 
     length_m = _number("length_m", length_m, positive=True)
     max_curvature_per_m = _number("max_curvature_per_m", max_curvature_per_m)
     knot_spacing_m = _number("knot_spacing_m", knot_spacing_m, positive=True)
+    if length_m / knot_spacing_m > MAX_RANDOM_TARGETS:  # a crafted config must not ask for billions of knots
+        raise ValueError(f"length_m / knot_spacing_m must be at most {MAX_RANDOM_TARGETS}, got {length_m} m / "
+                         f"{knot_spacing_m} m")
     rng = np.random.default_rng(_whole("seed", seed, 0))
     knots = np.arange(0.0, length_m + knot_spacing_m, knot_spacing_m)
     curvature_knots = rng.uniform(-abs(max_curvature_per_m), abs(max_curvature_per_m), len(knots))

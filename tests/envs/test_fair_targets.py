@@ -93,6 +93,8 @@ def test_the_harder_path_lasts_its_length_over_its_speed():
     ({"task": VelocityTracking, "num_random": 4, "speed_range_mps": [0.3, 0.1]}, "low <= high"),
     ({"task": VelocityTracking, "num_random": 4, "speed_range_mps": 0.2}, r"\[low, high\]"),
     ({"task": TrajectoryTracking, "path_seed": 1, "path_length_m": -2.0}, "length_m must be positive"),
+    ({"task": TrajectoryTracking, "path_seed": 1, "path_length_m": 1e12}, "must be at most 10000"),  # no hang
+    ({"task": VelocityTracking, "num_random": 10**9}, "num_random must be at most 10000"),
 ])
 def test_bad_target_options_are_one_line(options, message):
     options = dict(options)
