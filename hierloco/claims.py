@@ -121,6 +121,45 @@ def seed_means(rows, *, method: str, robot: str, setting: str, task: str, episod
     return np.array([np.mean([np.mean(c) for c in runs.values()]) for _, runs in sorted(by_seed.items())])
 
 
+def variant_verdicts(rows, reference: str, variants, tasks, *, reference_name: str | None = None) -> str:
+    """A markdown table: per robot, setting and task of ``tasks``, each method of ``variants`` against
+    ``reference`` by the stated tests over seeds paired by seed (``docs/statistics.md``): "better" (a lower cost by
+    at least the minimum effect) and "close" (within the equivalence margin); then how many places each variant is
+    better, close, worse, not testable or undecided. ``rows``: evaluation rows (``method``, ``robot``, ``setting``,
+    ``task``, ``seed``, ``episode``, ``normalized_cost``); a seed counts where both methods have it."""
+    from hierloco.stats import decide_better, decide_close
+
+    name = reference_name or reference
+    lines = [f"| robot | setting | task | variant | better than {name}? | as good as {name} (close)? |",
+             "|---|---|---|---|---|---|"]
+    tally: dict = {}
+    places = sorted({(r["robot"], r["setting"], r["task"]) for r in rows if r["task"] in tasks})
+    for robot, setting, task in places:
+        for method in variants:
+            pairs = []
+            for seed in sorted({r["seed"] for r in rows}):
+                of_seed = [r for r in rows if r["seed"] == seed]
+                pairs.append(tuple(seed_means(of_seed, method=m, robot=robot, setting=setting, task=task)
+                                   for m in (method, reference)))
+            pairs = [(a[0], b[0]) for a, b in pairs if a.size and b.size]
+            if not pairs:
+                continue
+            a, b = (np.array(x) for x in zip(*pairs))
+            better, close = decide_better(a, b, paired=True), decide_close(a, b, paired=True)
+            worse = decide_better(b, a, paired=True)
+            word = ("better" if better.verdict == "holds" else "worse" if worse.verdict == "holds"
+                    else "close" if close.verdict == "holds" else "not testable" if "testable" in close.verdict
+                    else "undecided")
+            tally.setdefault(method, {}).setdefault(word, 0)
+            tally[method][word] += 1
+            lines.append(f"| {robot} | {setting} | {task} | {method} | {better.text()} | {close.text()} |")
+    lines += ["", "| variant | better | close | worse | not testable | undecided |", "|---|---|---|---|---|---|"]
+    for method, counts in tally.items():
+        lines.append(f"| {method} | " + " | ".join(str(counts.get(w, 0)) for w in
+                                                  ("better", "close", "worse", "not testable", "undecided")) + " |")
+    return "\n".join(lines) + "\n"
+
+
 def seed_costs(runs: Iterable[Run], **labels) -> np.ndarray:
     """The pooled per-seed mean costs (``S``) of the runs with these labels (:func:`hierloco.evidence.select`,
     :func:`hierloco.evidence.seed_values`)."""
@@ -403,7 +442,9 @@ def folders_of(runs: Iterable[Run]) -> dict:
 class Study:
     """A study folder under ``results/`` (``name``) and how to read it: its job records (``records``: folders
     relative to ``results/``, the first that exists is read), else a per-episode table without records
-    (``table``), or a table of rows of its own read in place of records (``rows``, described by ``rows_note``);
+    (``table``), or a table of rows of its own read in place of records (``rows``, described by ``rows_note``), or
+    rows of its own made from its records in place of its runs (``rows_from(folder) -> (rows, incomplete)``: the
+    rows, and the records that lack what the rows need, :attr:`Evidence.incomplete`; described by ``rows_note``);
     ``robot``: only this robot's runs; ``reports``: stages whose reports are read from its records;
     ``archived``: tables without records (``<folder>/comparison.csv``) declared to be of this study's configurations
     (:func:`hierloco.evidence.adopt_configs`); ``variants`` and ``names``: the method variants its records hold
@@ -425,6 +466,7 @@ class Study:
     table: str = ""
     rows: str = ""
     rows_note: str = ""
+    rows_from: Callable | None = field(default=None, compare=False)
     robot: str = ""
     reports: tuple[str, ...] = ()
     archived: tuple[str, ...] = ()
@@ -492,11 +534,12 @@ class Claim:
     key (before any ``:``) is ``key`` (and that ``select`` keeps, when given). ``note(checks)``: a line the page adds
     below its table (``checks``: every source's). A claim nothing here can measure has no source, ``needs``
     says what it would need (or what is measured of it outside a test), and ``status`` whether it is "not measured
-    yet" or "not testable here". ``robots``: the robots it is about (one entry of the ledger per robot, where it has
-    no checks). ``counted(check)``: whether a check counts toward its robot's entry (default: every check); the
-    others stay on the page labelled ``extra`` (say the IK variant the paper did not use). ``page``:
-    :data:`PAPER_PAGE` (``paper_check.md``) or :data:`SANITY_PAGE` (``sanity_checks.md``: a check that only shows
-    the set-up behaves, not a claim of the paper's results). ``order``: its place in the paper."""
+    yet" or "not testable here"; a claim with a source may say in ``needs`` what its section asks for while its
+    source has no check of it (it is "not measured yet" then). ``robots``: the robots it is about (one entry of the
+    ledger per robot, where it has no checks). ``counted(check)``: whether a check counts toward its robot's entry
+    (default: every check); the others stay on the page labelled ``extra`` (say the IK variant the paper did not
+    use). ``page``: :data:`PAPER_PAGE` (``paper_check.md``) or :data:`SANITY_PAGE` (``sanity_checks.md``: a check
+    that only shows the set-up behaves, not a claim of the paper's results). ``order``: its place in the paper."""
 
     _: KW_ONLY
     order: float
@@ -741,9 +784,11 @@ def entry_counts(entries: list[Entry]) -> dict[str, int]:
 @dataclass
 class Evidence:
     """What the registered studies hold under ``results``: each study's runs (``runs[name]``), its findings (jobs
-    not evaluable), its stages' reports (``reports[name][stage]``), its rows of its own (``rows[name]``), where each
-    was read from (``sources``), the archived tables' runs, the compute of a study without records
-    (``compute_tables[name]``: ``(method, robot) -> minutes per job``), and the studies themselves."""
+    not evaluable), its stages' reports (``reports[name][stage]``), its rows of its own (``rows[name]``) and, for
+    rows made from records (:attr:`Study.rows_from`), the records that lack what they need (``incomplete[name]``,
+    their folders: a claim read from such rows is not measured yet), where each was read from (``sources``), the
+    archived tables' runs, the compute of a study without records (``compute_tables[name]``: ``(method, robot) ->
+    minutes per job``), and the studies themselves."""
 
     results: Path
     studies: tuple[Study, ...] = ()
@@ -751,6 +796,7 @@ class Evidence:
     findings: dict[str, list[dict]] = field(default_factory=dict)
     reports: dict[str, dict[str, list[dict]]] = field(default_factory=dict)
     rows: dict[str, list[dict]] = field(default_factory=dict)
+    incomplete: dict[str, list[str]] = field(default_factory=dict)
     sources: dict[str, str] = field(default_factory=dict)
     archived: list[Run] = field(default_factory=list)
     compute_tables: dict[str, dict] = field(default_factory=dict)
@@ -795,7 +841,12 @@ def load(results, names: Mapping | None = None, *, registry: ClaimRegistry | Non
     names = registry.names() if names is None else dict(names)
     for study in studies:
         found = next((p for p in (locate(results, r) for r in study.records) if p is not None), None)
-        if study.rows:
+        if study.rows_from is not None:
+            if found is not None:
+                rows, evidence.incomplete[study.name] = study.rows_from(found)
+                evidence.rows[study.name] = [{**row, "robot": study.robot} if study.robot else row for row in rows]
+                evidence.sources[study.name] = _shown(found, results) + study.rows_note
+        elif study.rows:
             if (table := locate(results, study.rows)) is not None:
                 evidence.rows[study.name] = [{**row, "robot": study.robot} for row in read_csv(table)]
                 evidence.sources[study.name] = _shown(table, results) + study.rows_note

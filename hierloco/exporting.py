@@ -331,6 +331,9 @@ def export_run(run_dir: str | os.PathLike, out_dir: str | os.PathLike, *, settin
     if trained_model is not None and low_level is None and trained_policy is not None:
         low_level = {"kind": "latent", "action_low": trained_policy.latent_low.tolist(),
                      "action_high": trained_policy.latent_high.tolist(), "num_choices": None}
+    if trained_model is not None and trained_model.metadata.get("context"):
+        raise ArtifactError(f"{model_path.name} also reads {', '.join(trained_model.metadata['context'])} beside the "
+                            "action (dynamics.body_state): the export does not carry such a model yet")
     if (trained_model is not None and trained_policy is not None and (low_level or {}).get("kind") == "latent"
             and trained_model.model.action_dim != trained_policy.policy.latent_dim):
         raise ArtifactError(f"{model_path.name} takes {trained_model.model.action_dim}-D actions but "

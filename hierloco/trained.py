@@ -35,16 +35,18 @@ MANIFEST = "run.json"
 
 def make_world_model(model, low_level, *, task=None, device: str = "cpu"):
     """The :class:`~hierloco.envs.world_model.CoMWorldModelEnv` of a trained CoM ``model`` (a
-    :class:`~hierloco.components.com_model.CoMModel`) over ``low_level``'s action space (a box, or a finite
-    set of choices with the low level's action features)."""
+    :class:`~hierloco.components.com_model.TrainedCoMModel`, or its :class:`~hierloco.components.com_model.CoMModel`)
+    over ``low_level``'s action space (a box, or a finite set of choices with the low level's action features); a
+    model trained on state keys beside the action (its metadata's ``context``, e.g. ``body_state``) reads them."""
     from hierloco.envs.world_model import CoMWorldModelEnv
 
-    net = model.to(device).eval()
+    context = dict(getattr(model, "metadata", {}).get("context") or {})
+    net = getattr(model, "model", model).to(device).eval()
     if low_level.num_choices is not None:
         return CoMWorldModelEnv(net, num_choices=low_level.num_choices, action_features=low_level.action_features,
-                                task=task, device=device)
+                                task=task, device=device, context=context)
     return CoMWorldModelEnv(net, action_low=low_level.action_low, action_high=low_level.action_high,
-                            action_features=low_level.action_features, task=task, device=device)
+                            action_features=low_level.action_features, task=task, device=device, context=context)
 
 
 @dataclass
@@ -128,7 +130,7 @@ class TrainedRun:
     def world_model(self, setting: str = "normal", task=None, device: str | None = None):
         """The learned CoM world model env of ``setting``, scoring with ``task`` (a :class:`hierloco.envs.Task`)."""
         device = self._device(device)
-        return make_world_model(self.com_model(setting).model, self.low_level(device=device), task=task, device=device)
+        return make_world_model(self.com_model(setting), self.low_level(device=device), task=task, device=device)
 
     def dynamics_data(self, setting: str = "normal"):
         """The CoM dynamics data of ``setting`` (a :class:`~hierloco.components.dynamics_data.TransitionData`:
@@ -166,7 +168,7 @@ class TrainedRun:
         risk = options.pop("risk", "none") if risk is None else risk
         beta = options.pop("beta", 1.0) if beta is None else beta
         model = self.com_model(setting) if model is None else model
-        world_model = make_world_model(getattr(model, "model", model), self.low_level(device=device), task=task,
+        world_model = make_world_model(model, self.low_level(device=device), task=task,
                                        device=device)
         world_model.set_cost(cost)
         world_model.set_risk(risk, beta)

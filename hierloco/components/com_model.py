@@ -139,7 +139,7 @@ def _nonzero_std(std: torch.Tensor) -> torch.Tensor:
 # agrees with train_com_model's arguments and the pipeline's dynamics keys.
 RESERVED_OPTIONS = ("com_state", "action", "next_com_state", "model", "lr", "batch_size", "holdout", "max_epochs",
                     "patience", "duration", "seed", "device", "progress", "num_transitions", "num_robots",
-                    "episode_length")
+                    "episode_length", "body_state")
 
 
 def _recorded_options(signature: inspect.Signature, args: tuple, kwargs: dict) -> dict:

@@ -65,19 +65,24 @@ class UniformActionPolicy(TensorDictModuleBase):
 
 @dataclass
 class TransitionData:
-    """M transitions ``(com_state, action) -> next_com_state``, world frame ``(x, y, yaw, vx, vy)``."""
+    """M transitions ``(com_state, action) -> next_com_state``, world frame ``(x, y, yaw, vx, vy)``; ``body_state``
+    (``M x 3``: roll, pitch in rad, the base's height above the ground in m at each action's start, what the trunk
+    felt of the ground; ``None`` in data collected before it was recorded)."""
 
     com_state: np.ndarray
     action: np.ndarray
     next_com_state: np.ndarray
     metadata: dict = field(default_factory=dict)
+    body_state: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.com_state)
 
     def save(self, path: str | os.PathLike) -> None:
-        save_arrays(path, {"com_state": self.com_state, "action": self.action,
-                           "next_com_state": self.next_com_state}, {**self.metadata, "kind": "transitions"})
+        arrays = {"com_state": self.com_state, "action": self.action, "next_com_state": self.next_com_state}
+        if self.body_state is not None:
+            arrays["body_state"] = self.body_state
+        save_arrays(path, arrays, {**self.metadata, "kind": "transitions"})
 
     def achievable_speeds(self, percentile: float = 95.0) -> dict[str, float]:
         """What the robot can still do under this data's low level and setting (e.g. a fault): the ``percentile`` of
@@ -110,7 +115,8 @@ class TransitionData:
     @classmethod
     def load(cls, path: str | os.PathLike) -> "TransitionData":
         arrays, metadata = load_arrays(path)
-        if metadata.pop("kind", None) != "transitions" or set(arrays) != {"com_state", "action", "next_com_state"}:
+        names = {"com_state", "action", "next_com_state"}
+        if metadata.pop("kind", None) != "transitions" or not names <= set(arrays) <= names | {"body_state"}:
             raise ArtifactError(f"{path} is not a transitions file")
         return cls(**arrays, metadata=metadata)
 
@@ -131,7 +137,7 @@ def collect_transitions(env: LatentActionEnv, num_transitions: int, *, episode_l
     collector = Collector(env, UniformActionPolicy(env.action_spec, seed), frames_per_batch=num_robots,
                           total_frames=-1, max_frames_per_traj=int(episode_length), reset_at_each_iter=False,
                           auto_register_policy_transforms=False)
-    states, actions, next_states = [], [], []
+    states, actions, next_states, bodies = [], [], [], []
     kept = dropped = 0
     bar = tqdm(total=int(num_transitions), desc=f"dynamics data ({env.robot.name})", disable=not progress)
     try:
@@ -145,6 +151,8 @@ def collect_transitions(env: LatentActionEnv, num_transitions: int, *, episode_l
                 states.append(batch["com_state"][index])
                 actions.append(batch["action"][index].reshape(take, -1).to(torch.float32))
                 next_states.append(batch["next", "com_state"][index])
+                if "body_state" in batch.keys():  # an env that reports it (LatentActionEnv)
+                    bodies.append(batch["body_state"][index])
             kept += take
             bar.update(take)
             if kept >= num_transitions:
@@ -163,4 +171,5 @@ def collect_transitions(env: LatentActionEnv, num_transitions: int, *, episode_l
                 "num_robots": int(num_robots), "dropped_failures": dropped, "actions_executed": kept + dropped,
                 "disabled_legs": list(env.sim.disabled_legs), "limp_legs": list(env.sim.limp_legs)}
     return TransitionData(torch.cat(states).double().numpy(), torch.cat(actions).double().numpy(),
-                          torch.cat(next_states).double().numpy(), metadata)
+                          torch.cat(next_states).double().numpy(), metadata,
+                          torch.cat(bodies).double().numpy() if len(bodies) == len(states) else None)

@@ -32,6 +32,7 @@ from tqdm.auto import tqdm
 from hierloco.components.experts import RaibertController, run_closed_loop
 from hierloco.envs.batched_sim import BatchedSimulator
 from hierloco.envs.frames import world_to_local
+from hierloco.envs.terrain import make_terrain
 from hierloco.envs.robots import (
     CONTROL_TIMESTEP,
     RobotSpec,
@@ -179,6 +180,8 @@ def build_expert_library(
     command_high: Sequence[float] | None = None,
     max_rounds: int = 5,
     max_failed_experts: int | None = None,
+    swing_height_m: float | None = None,
+    terrain=None,
     progress: bool = False,
 ) -> ExpertLibrary:
     """Builds a library of ``num_experts`` gaits (see the module docstring).
@@ -199,8 +202,18 @@ def build_expert_library(
         max_rounds: rounds of replacing fallen experts by fresh commands.
         max_failed_experts: the build stops as soon as more experts than this have fallen or blown up, over all
             rounds (default: :func:`default_max_failed_experts`).
+        swing_height_m: the experts' foot lift, m (default: the robot's ``swing_height``): more clearance for
+            uneven ground (``docs/terrain.md``).
+        terrain: the ground the experts walk on while they are recorded (a :class:`~hierloco.envs.terrain.Terrain`
+            or its spec; default flat): experts whose recorded steps met the ground's bumps and edges.
     """
-    robot = get_robot(robot)
+    robot = own = get_robot(robot)  # own: the robot as described (the metadata's), robot: the experts' foot lift
+    if swing_height_m is not None:
+        if not (isinstance(swing_height_m, (int, float)) and 0 < float(swing_height_m) < robot.standing_height):
+            raise ValueError(f"swing_height_m must be a foot lift in (0, {robot.standing_height:g}) m (below "
+                             f"{robot.name}'s standing height), got {swing_height_m!r}")
+        robot = robot.replace(swing_height=float(swing_height_m))
+    terrain = make_terrain(terrain)
     low, high = command_box(robot, command_low, command_high)
     if int(num_experts) < 1:
         raise ValueError(f"num_experts must be at least 1, got {num_experts}")
@@ -224,7 +237,8 @@ def build_expert_library(
     pending = wanted
     bar = tqdm(total=num_experts, desc=f"experts ({robot.name})", disable=not progress)
     for _ in range(max_rounds):
-        sim = BatchedSimulator(robot, len(pending), disabled_legs=disabled_legs, seed=int(rng.integers(2**31)))
+        sim = BatchedSimulator(robot, len(pending), disabled_legs=disabled_legs, seed=int(rng.integers(2**31)),
+                               terrain=terrain)
         controller = RaibertController(robot, len(pending))
         # settle closed loop, freeze the feedback, let one gait period pass, record one action
         record = settle_steps + period_steps
@@ -253,11 +267,13 @@ def build_expert_library(
     cmds, targets, states, contacts = (np.stack(x) for x in zip(*records))
     displacement, velocity, yaw_rate = action_motion(states, steps_per_action * CONTROL_TIMESTEP)
     metadata = {
-        **robot_metadata(robot),
+        **robot_metadata(own),
         "steps_per_action": int(steps_per_action), "gait_period": robot.gait_period,
         "seed": int(seed), "settle_time": settle_steps * CONTROL_TIMESTEP, "disabled_legs": list(disabled_legs),
         "joint_names": list(robot.joint_names), "rejected_commands": rejected,
         "command_low": low.tolist(), "command_high": high.tolist(),
+        **({"swing_height_m": robot.swing_height} if swing_height_m is not None else {}),
+        **({"terrain": terrain.key()} if terrain.key() else {}),
     }
     library = ExpertLibrary(commands=cmds, joint_targets=targets, com_states=states, foot_contacts=contacts,
                             velocity_local=velocity, yaw_rate=yaw_rate, displacement_local=displacement,

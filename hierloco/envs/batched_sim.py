@@ -336,6 +336,17 @@ class BatchedSimulator:
         return self.state[:, self._qpos][:, self._joint_qpos]
 
     @property
+    def body_state(self) -> np.ndarray:
+        """``B x 3`` what each copy's trunk feels of the ground now: roll and pitch (rad) and the base's height above
+        the lowest ground near it (m; above the floor on flat ground), as falls are judged (``docs/terrain.md``)."""
+        qpos = self.qpos
+        roll_pitch = quat_to_roll_pitch_yaw(qpos[:, 3:7])[:, :2]
+        height = qpos[:, 2]
+        if not self.terrain.is_flat:
+            height = height - self.terrain.ground_below(qpos[:, 0], qpos[:, 1], self._ground_reach)
+        return np.concatenate([roll_pitch, height[:, None]], axis=1)
+
+    @property
     def qvel(self) -> np.ndarray:
         """``B x nv`` current generalised velocities (the free joint's ``0:3`` in the world frame in m/s, ``3:6``
         in the base frame in rad/s)."""

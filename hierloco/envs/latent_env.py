@@ -4,7 +4,9 @@ RA-L 2021, Sec. III-A: the high level acts at about 1 Hz, the low level at 100 H
 For LAT the action is a latent z in the learned latent box and a step runs ``pi(., z)`` for N control steps (1 s)
 on every robot through the batched simulator; with another low level the action is an expert index (LIB) or a
 velocity command (IK). Observations are the CoM state ``com_state`` = ``(x, y, yaw, vx, vy)`` (world frame) and
-``com_velocity_local`` (local yaw frame) at the end of the action. A robot that falls (or whose physics blows up)
+``com_velocity_local`` (local yaw frame) at the end of the action, and ``body_state`` (roll, pitch in rad and
+the base's height above the ground below it in m: what the trunk feels of the ground,
+:attr:`~hierloco.envs.batched_sim.BatchedSimulator.body_state`). A robot that falls (or whose physics blows up)
 during the action is terminated. With a robot whose ``com_noise`` is set (a perturbed "hardware" copy,
 :mod:`hierloco.envs.robots.hardware`) both are measured with that noise, as a state estimator would, and the true
 state is ``com_state_true``. Rewards come from a task (see :mod:`hierloco.envs.tasks`); without one they are 0.
@@ -89,6 +91,7 @@ class LatentActionEnv(EnvBase):
         flag = Categorical(2, (b, 1), dtype=torch.bool, device=self.device)
         observation = {"com_state": Unbounded((b, 5), device=self.device),
                        "com_velocity_local": Unbounded((b, 2), device=self.device),
+                       "body_state": Unbounded((b, 3), device=self.device),
                        "is_init": flag.clone()}
         if self.com_noise.any():
             observation["com_state_true"] = Unbounded((b, 5), device=self.device)
@@ -122,7 +125,8 @@ class LatentActionEnv(EnvBase):
             state = state + std * self._noise_rng.standard_normal(state.shape)
             velocity_local = world_to_local(state[:, 3:5], state[:, 2])
         obs.update({"com_state": torch.as_tensor(state, dtype=torch.float32, device=self.device),
-                    "com_velocity_local": torch.as_tensor(velocity_local, dtype=torch.float32, device=self.device)})
+                    "com_velocity_local": torch.as_tensor(velocity_local, dtype=torch.float32, device=self.device),
+                    "body_state": torch.as_tensor(self.sim.body_state, dtype=torch.float32, device=self.device)})
         if self.record:
             if result is None:  # at reset: standing still, all feet down
                 n, legs = self.steps_per_action, len(self.robot.legs)

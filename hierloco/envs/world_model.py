@@ -139,10 +139,20 @@ class _CoMStep(nn.Module):
     def scoring(self) -> Cost | None:
         return self.cost if self.cost is not None else self.task
 
-    def forward(self, com_state, action, episode, step):
-        """``... x 5``, ``... x A``, ``... x 1``, ``... x 1`` -> next ``com_state``, ``reward`` ``... x 1``, next
-        ``task_step``."""
-        features = (action if self.action_features is None else self.action_features(action)).to(com_state.dtype)
+    def features(self, action, context, dtype) -> torch.Tensor:
+        """The model's input beside the state: the action's features, then each context tensor (``... x C``, held
+        over the horizon), leading dimensions broadcast."""
+        features = (action if self.action_features is None else self.action_features(action)).to(dtype)
+        if not context:
+            return features
+        parts = [features, *(c.to(dtype) for c in context)]
+        batch = torch.broadcast_shapes(*(part.shape[:-1] for part in parts))
+        return torch.cat([part.expand(*batch, part.shape[-1]) for part in parts], -1)
+
+    def forward(self, com_state, action, episode, step, *context):
+        """``... x 5``, ``... x A``, ``... x 1``, ``... x 1`` (then the context tensors ``... x C``) -> next
+        ``com_state``, ``reward`` ``... x 1``, next ``task_step``."""
+        features = self.features(action, context, com_state.dtype)
         next_state = self.model.predict(com_state, features)
         if self.scoring is None:
             return next_state, torch.zeros_like(next_state[..., :1]), step + 1
@@ -150,10 +160,10 @@ class _CoMStep(nn.Module):
         cost = self.scoring(com_state, next_state, action, info)
         return next_state, -cost.unsqueeze(-1).to(next_state.dtype), step + 1
 
-    def particles_forward(self, com_state, action, episode, step, particles, spent):
+    def particles_forward(self, com_state, action, episode, step, particles, spent, *context):
         """As :meth:`forward` with ``P`` particles ``... x P x 5`` and their costs so far ``... x P``; also returns
         the next particles and their costs."""
-        features = (action if self.action_features is None else self.action_features(action)).to(com_state.dtype)
+        features = self.features(action, context, com_state.dtype)
         next_particles = self.model.predict_particles(particles, features.unsqueeze(-2), self.generator)
         next_state, spread = particle_moments(next_particles)
         total = spent
@@ -169,10 +179,11 @@ class _StepModule(TensorDictModuleBase):
     """:class:`_CoMStep` on TensorDicts; the particle keys are made from ``com_state`` when a state lacks them; the
     done flags are set at the task's end."""
 
-    def __init__(self, module: _CoMStep):
+    def __init__(self, module: _CoMStep, context_keys: Sequence[str] = ()):
         super().__init__()
         self.module = module
-        self.in_keys = ["com_state", "action", "task_episode", "task_step"]
+        self.context_keys = list(context_keys)
+        self.in_keys = ["com_state", "action", "task_episode", "task_step", *self.context_keys]
         self.out_keys = ["com_state", "reward", "task_step"]
         if module.particles:
             self.in_keys += ["com_state_particles", "cost_particles"]
@@ -181,8 +192,13 @@ class _StepModule(TensorDictModuleBase):
 
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
         inputs = [tensordict.get(key) for key in ("com_state", "action", "task_episode", "task_step")]
+        missing = [key for key in self.context_keys if key not in tensordict.keys()]
+        if missing:
+            raise KeyError(f"the world model's dynamics model also reads {', '.join(missing)} (held over the horizon "
+                           "from the measured state): give it in the state")
+        context = [tensordict.get(key) for key in self.context_keys]
         if not self.module.particles:
-            outputs = self.module(*inputs)
+            outputs = self.module(*inputs, *context)
         else:
             com_state = inputs[0]
             count, batch = self.module.particles, com_state.shape[:-1]
@@ -192,7 +208,7 @@ class _StepModule(TensorDictModuleBase):
             spent = tensordict.get("cost_particles", None)
             if spent is None:
                 spent = torch.zeros(*batch, count, dtype=com_state.dtype, device=com_state.device)
-            outputs = self.module.particles_forward(*inputs, particles, spent)
+            outputs = self.module.particles_forward(*inputs, particles, spent, *context)
         next_step = outputs[2]
         task = self.module.task
         ended = (next_step >= task.num_steps if task is not None
@@ -228,18 +244,27 @@ class CoMWorldModelEnv(ModelBasedEnvBase):
         risk: ``"none"``, ``"mean_std"`` or ``"pessimistic"``: how the particles' costs make the reward (a model with
             particles only). beta: the weight of the standard deviation in ``mean_std``.
         seed: seeds the draws of a model that samples its particles (trajectory sampling, moment matching).
+        context: state keys the model also reads, name -> size ``C`` (e.g. ``{"body_state": 3}``: roll, pitch and
+            height, :class:`~hierloco.envs.latent_env.LatentActionEnv`): taken from the measured state, held over
+            the horizon and appended to the action's features (a model trained on them, ``dynamics.body_state``,
+            ``docs/terrain.md``); they join :attr:`measured_keys`.
     """
 
     def __init__(self, model: nn.Module, *, action_low: Sequence[float] | None = None,
                  action_high: Sequence[float] | None = None, num_choices: int | None = None,
                  task: Task | None = None, action_features=None, device: str = "cpu", cost: Cost | None = None,
-                 risk: str = "none", beta: float = 1.0, seed: int = 0):
+                 risk: str = "none", beta: float = 1.0, seed: int = 0, context: dict | None = None):
         _check_risk(model, risk, beta)
         if cost is not None and not callable(cost):
             raise ValueError(f"cost must be a callable (com_state, next_com_state, action, info), got {cost!r}")
         self.generator = torch.Generator(device=device).manual_seed(int(seed))
         step = _CoMStep(model, task, cost, action_features, risk=risk, beta=beta, generator=self.generator)
-        super().__init__(_StepModule(step), device=device)
+        self.context = {str(key): int(size) for key, size in (context or {}).items()}
+        bad = [key for key, size in self.context.items() if size < 1 or key in MEASURED_KEYS]
+        if bad:
+            raise ValueError(f"context: {', '.join(bad)} must be other keys than {', '.join(MEASURED_KEYS)}, each of "
+                             "size >= 1")
+        super().__init__(_StepModule(step, list(self.context)), device=device)
         self.model = model
         self.task = task
         if task is not None and hasattr(task, "to_device"):
@@ -247,11 +272,12 @@ class CoMWorldModelEnv(ModelBasedEnvBase):
         self.cost = cost
         self.risk, self.beta = risk, float(beta)
         self.num_particles = step.particles
-        self.measured_keys = list(MEASURED_KEYS)
+        self.measured_keys = [*MEASURED_KEYS, *self.context]
         observation = dict(
             com_state=Unbounded((5,), device=self.device),
             task_episode=Unbounded((1,), dtype=torch.int64, device=self.device),
             task_step=Unbounded((1,), dtype=torch.int64, device=self.device),
+            **{key: Unbounded((size,), device=self.device) for key, size in self.context.items()},
         )
         if self.num_particles:
             observation["com_state_particles"] = Unbounded((self.num_particles, 5), device=self.device)
@@ -296,16 +322,18 @@ class CoMWorldModelEnv(ModelBasedEnvBase):
         self.world_model.module.risk, self.world_model.module.beta = risk, float(beta)
 
     def imagined_return(self, com_state: torch.Tensor, episode: torch.Tensor, step: torch.Tensor,
-                        actions: torch.Tensor) -> torch.Tensor:
+                        actions: torch.Tensor, *context: torch.Tensor) -> torch.Tensor:
         """``B x S`` summed rewards of ``B x S x H x A`` action sequences from ``B`` measured states (``com_state``
         ``B x 5``, ``episode`` and ``step`` ``B x 1``): what :meth:`step` gives over the horizon, summed, on tensors
         alone (no TensorDict), so that ``torch.compile`` captures a planner's whole scoring in one graph
-        (:meth:`hierloco.components.planners.BoxPlannerBase.set_scoring`). Particles start at ``com_state``."""
+        (:meth:`hierloco.components.planners.BoxPlannerBase.set_scoring`). Particles start at ``com_state``;
+        ``context``: the :attr:`context` tensors ``B x C`` in its order."""
         module = self.world_model.module
         batch, count, horizon = actions.shape[:3]
         state = com_state.unsqueeze(1).expand(batch, count, com_state.shape[-1])
         episode = episode.unsqueeze(1).expand(batch, count, episode.shape[-1])
         step = step.unsqueeze(1).expand(batch, count, step.shape[-1])
+        context = [c.unsqueeze(1).expand(batch, count, c.shape[-1]) for c in context]
         total = com_state.new_zeros(batch, count)
         if module.particles:
             particles = state.unsqueeze(-2).expand(batch, count, module.particles, state.shape[-1])
@@ -313,9 +341,9 @@ class CoMWorldModelEnv(ModelBasedEnvBase):
         for h in range(horizon):
             if module.particles:
                 state, reward, step, particles, spent = module.particles_forward(state, actions[:, :, h], episode,
-                                                                                 step, particles, spent)
+                                                                                 step, particles, spent, *context)
             else:
-                state, reward, step = module(state, actions[:, :, h], episode, step)
+                state, reward, step = module(state, actions[:, :, h], episode, step, *context)
             total = total + reward.squeeze(-1)
         return total
 
@@ -337,7 +365,7 @@ class CoMWorldModelEnv(ModelBasedEnvBase):
 
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
         if tensordict is not None and "com_state" in tensordict.keys():
-            out = tensordict.select("com_state", "task_episode", "task_step", strict=False).clone()
+            out = tensordict.select("com_state", "task_episode", "task_step", *self.context, strict=False).clone()
             if "task_episode" not in out.keys():
                 out.update(self.initial_state(out["com_state"]).exclude("com_state"))
             if self.num_particles:  # a measured state: every particle starts there, nothing spent yet

@@ -226,8 +226,8 @@ def check_world(c: Checker) -> None:
             makers[key](_plain(value))
         except TerrainError as error:
             text = str(error)
-            if where == "eval.":  # "eval.terrain 'rough': ...", "eval.pushes: ..."
-                c.fail(f"eval.{text}" if text.startswith(key) else f"eval.{key}: {text}")
+            if where.endswith("."):  # "eval.terrain 'rough': ...", "eval.pushes: ..."
+                c.fail(f"{where}{text}" if text.startswith(key) else f"{where}{key}: {text}")
             else:
                 c.fail(f"{where}{text}" if where or text.startswith(key) else f"{key}: {text}")
 
@@ -306,6 +306,10 @@ def check_experts(c: Checker, robot, *, library: bool = True) -> None:
             c.fail(f"experts.tune must be true or false, got {get(c.cfg, 'experts.tune')!r}")
         if get(c.cfg, "experts.tune_budget") is not None:
             c.positive("experts.tune_budget")
+        swing = get(c.cfg, "experts.swing_height_m")
+        if swing is not None and not (_is_number(swing) and 0 < swing < (robot.standing_height if robot else 1.0)):
+            c.fail(f"experts.swing_height_m must be a foot lift in m, above 0 and below the robot's standing height "
+                   f"{robot.standing_height if robot else 1.0:g} m, or null (the robot's), got {swing!r}")
         failed = get(c.cfg, "experts.max_failed_experts")
         if failed is not None and not (_is_int(failed) and failed >= 0):
             c.fail(f"experts.max_failed_experts must be an integer >= 0 or null, got {failed!r}")
@@ -369,7 +373,7 @@ def check_policy(c: Checker) -> None:
 
 
 DYNAMICS_KEYS = ("num_transitions", "num_robots", "episode_length", "hidden", "lr", "batch_size", "holdout",
-                 "patience", "max_epochs", "model")
+                 "patience", "max_epochs", "model", "body_state")
 
 
 def check_dynamics(c: Checker) -> None:
@@ -388,6 +392,8 @@ def check_dynamics(c: Checker) -> None:
         except ValueError as error:
             c.fail(f"dynamics: {error}")
 
+    if not isinstance(get(c.cfg, "dynamics.body_state", False), bool):
+        c.fail(f"dynamics.body_state must be true or false, got {get(c.cfg, 'dynamics.body_state')!r}")
     c.integer("dynamics.num_transitions", minimum=MIN_TRANSITIONS)
     for key in ("dynamics.num_robots", "dynamics.episode_length", "dynamics.hidden", "dynamics.batch_size",
                 "dynamics.patience", "dynamics.max_epochs"):

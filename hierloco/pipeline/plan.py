@@ -93,12 +93,17 @@ class Plan:
         self.__dict__.update(parts)
 
     def stages(self) -> list[Stage]:
-        seen, ordered = set(), []
+        """Every stage once, in the plan's order; a name given to two stages with different keys is a recipe's
+        mistake (one would shadow the other), a ``ValueError`` naming it."""
+        seen, ordered = {}, []
         for part in self.__dict__.values():
             for stage in _stages_of(part):
                 if stage.name not in seen:
-                    seen.add(stage.name)
+                    seen[stage.name] = stage
                     ordered.append(stage)
+                elif seen[stage.name].digest != stage.digest:
+                    raise ValueError(f"the plan names two different stages {stage.name!r} (keys {seen[stage.name].digest}"
+                                     f" and {stage.digest}): a recipe's stages need names of their own")
         return ordered
 
     def __iter__(self) -> Iterator[Stage]:

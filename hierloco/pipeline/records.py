@@ -4,7 +4,10 @@ A study's run directories hold large artifacts (experts, models, buffers) and st
 small part of a finished job, one file ``record.json``: what ran (the job's method and overrides: its
 *signature*), the key of every stage its recipe planned, the per-episode result rows of its evaluations (read from
 the evaluation artifacts those keys name, never from a loose CSV), what its stages took (``report``, ``builds``),
-and a digest over all of it. A study given a records directory (``records=results/<study>/records``) writes the
+for a job that asks for one a per-action table derived from the same evaluations (``actions``: one row per latent
+action of every evaluated episode, e.g. the gait it walked; :attr:`hierloco.pipeline.studies.Job.actions`), and a
+digest over all of it. A record without a per-action table has no ``actions`` field at all, so the records made
+before it existed verify unchanged. A study given a records directory (``records=results/<study>/records``) writes the
 record of every job it ran or reused, and takes a job from its record when its run directory is missing (a fresh
 machine, a cluster without shared storage) *only* if the record verifies (its digest), ran the same method and
 overrides, and holds for every stage the recipe plans today the key it has today. An edited or incomplete record
@@ -186,13 +189,16 @@ def _clean(value):
     return value
 
 
+LABELS = ("method", "robot", "setting", "task", "gait", "needed")  # a row's text columns (an action's gait)
+
+
 def _restore(value):
-    """The non-finite numbers :func:`_clean` wrote as strings, as floats again; a row's labels (method, robot,
-    setting, task) stay text, so a task named ``nan`` or ``inf`` is still a name."""
+    """The non-finite numbers :func:`_clean` wrote as strings, as floats again; a row's labels (:data:`LABELS`)
+    stay text, so a task named ``nan`` or ``inf`` is still a name."""
     if isinstance(value, str) and value in ("nan", "inf", "-inf"):
         return float(value)
     if isinstance(value, dict):
-        return {k: v if k in ("method", "robot", "setting", "task") else _restore(v) for k, v in value.items()}
+        return {k: v if k in LABELS else _restore(v) for k, v in value.items()}
     if isinstance(value, list):
         return [_restore(v) for v in value]
     return value
@@ -200,19 +206,24 @@ def _restore(value):
 
 def make_record(signature: dict, specs: Iterable[StageSpec], *, rows: list[dict] | None = None,
                 finding: dict | None = None, report: dict | None = None, builds: dict | None = None,
-                seconds: float | None = None) -> dict:
+                seconds: float | None = None, actions: list[dict] | None = None) -> dict:
     """A record: the job's ``signature``, each planned stage's key (by its file), and either its ``rows`` or the
-    ``finding`` it ended in, with what it took; sealed with a digest over all of it."""
+    ``finding`` it ended in, with what it took; with ``actions`` (a job with rows only) its per-action table, each
+    row naming its ``setting``, ``task``, ``episode`` and ``action`` (0, 1, ... in each evaluated episode); sealed
+    with a digest over all of it. Without ``actions`` the record has no such field (its digest is what it was before
+    per-action tables existed)."""
     body = {"format": FORMAT, "signature": signature,
             "stages": {spec.filename: {"name": spec.name, "key": normalized(spec.key)} for spec in specs},
             "rows": _clean(rows) if rows is not None else None, "finding": finding,
-            "report": _clean(report or {}), "builds": builds or {}, "seconds": seconds}
+            "report": _clean(report or {}), "builds": builds or {}, "seconds": seconds,
+            **({"actions": _clean(actions)} if actions is not None else {})}
     return _restored({**body, "digest": _digest(body)})
 
 
 def _restored(record: dict) -> dict:
     """A record as code uses it: non-finite numbers as floats (on disk they are strings, so the file is JSON)."""
-    return {**record, "rows": _restore(record["rows"]), "report": _restore(record["report"])}
+    return {**record, "rows": _restore(record["rows"]), "report": _restore(record["report"]),
+            **({"actions": _restore(record["actions"])} if "actions" in record else {})}
 
 
 def read(directory: str | os.PathLike) -> dict:
@@ -247,6 +258,8 @@ def _read(directory: str | os.PathLike, key: bytes | None) -> dict:
     if (record["rows"] is None) == (record["finding"] is None):
         raise RecordError(f"record {path} holds neither rows nor a finding")
     problem = _rows_problem(record) if record["rows"] is not None else None
+    if not problem and "actions" in record:
+        problem = _actions_problem(record)
     if problem:
         raise RecordError(f"record {path}: its rows do not agree with its stages ({problem}); restore it from git or "
                           "remove it to run the job again")
@@ -298,6 +311,30 @@ def _rows_problem(record: dict) -> str | None:
     for (setting, task), numbers in episodes.items():
         if numbers != list(range(len(numbers))):
             return f"the rows of {setting}/{task} are numbered {str(numbers)[:60]}, not 0, 1, ..."
+    return None
+
+
+def _actions_problem(record: dict) -> str | None:
+    """What in a record's per-action table (``actions``) disagrees with its rows, or ``None``: a table belongs to a
+    record with rows, each of its rows is a mapping of an evaluated episode (its setting, task and episode among the
+    record's rows), and every evaluated episode has its actions numbered 0, 1, ... in order."""
+    actions = record["actions"]
+    if record["rows"] is None or not isinstance(actions, list):
+        return "a per-action table is a list of rows beside the record's rows"
+    evaluated = {(row.get("setting"), row.get("task"), row.get("episode")) for row in record["rows"]}
+    numbers: dict[tuple, list] = {episode: [] for episode in evaluated}
+    for index, row in enumerate(actions):
+        if not isinstance(row, dict):
+            return f"action row {index} is not a mapping"
+        episode = (row.get("setting"), row.get("task"), row.get("episode"))
+        if episode not in numbers:
+            return (f"action row {index} is of {str(episode[0])[:40]}/{str(episode[1])[:40]} episode "
+                    f"{str(episode[2])[:20]}, which no row evaluates")
+        numbers[episode].append(row.get("action"))
+    for (setting, task, episode), found in sorted(numbers.items(), key=str):
+        if found != list(range(len(found))) or not found:
+            return (f"the actions of {setting}/{task} episode {episode} are numbered {str(found)[:60] or 'none'}, not "
+                    "0, 1, ...")
     return None
 
 

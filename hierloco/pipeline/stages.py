@@ -61,7 +61,8 @@ class GaitPolicyQualityError(Finding, ValueError):
 
 # ---------------------------------------------------------------------------------------------------- experts
 # Options added after runs were recorded, keyed only when they differ from these defaults (docs/pipeline.md).
-EXPERTS_DEFAULTS = {"tune": False, "tune_budget": 300.0, "gaits": None, "gait_boxes": None, "max_failed_experts": None}
+EXPERTS_DEFAULTS = {"tune": False, "tune_budget": 300.0, "gaits": None, "gait_boxes": None, "max_failed_experts": None,
+                    "swing_height_m": None}
 POLICY_DEFAULTS = {"adaptive": False, "budget_epochs": None}
 
 
@@ -82,7 +83,8 @@ def build_experts(run, params) -> ExpertLibrary:
     options = {"steps_per_action": params["steps_per_action"], "seed": params["seed"],
                "settle_time": params["settle_time"], "command_low": params.get("command_low"),
                "command_high": params.get("command_high"), "progress": run.progress,
-               "max_failed_experts": params.get("max_failed_experts")}
+               "max_failed_experts": params.get("max_failed_experts"),
+               "swing_height_m": params.get("swing_height_m")}
     with warnings.catch_warnings():  # check_experts raises with the same diagnosis, in one line
         warnings.filterwarnings("ignore", message=".*do not walk as commanded", category=RuntimeWarning)
         if params.get("gaits"):  # experts over several gaits, one gait policy over all (hierloco.components.gaits)
@@ -200,6 +202,7 @@ def latent_low_level(policy: Stage) -> dict:
 
 # ---------------------------------------------------------------------------------------------------- dynamics
 DATA_KEYS = ("num_transitions", "num_robots", "episode_length")
+BODY_CONTEXT = {"body_state": 3}  # roll, pitch (rad), height above the ground (m): LatentActionEnv's body_state
 MODEL_KEYS = ("hidden", "lr", "batch_size", "holdout", "patience", "max_epochs")
 
 
@@ -257,8 +260,10 @@ def model_params(cfg) -> dict:
 
 
 def dynamics_model_stage(cfg, data: Stage, setting: str) -> Stage:
+    """The CoM model of ``setting``; with ``dynamics.body_state=true`` it also reads what the trunk feels of the
+    ground at the action's start (roll, pitch, height: :data:`BODY_CONTEXT`), keyed only then."""
     params = {"seed": cfg.seed, "device": training_device(cfg), "duration": cfg.steps_per_action * CONTROL_TIMESTEP,
-              **model_params(cfg)}
+              **model_params(cfg), **({"body_state": True} if section(cfg, "dynamics").get("body_state") else {})}
     return Stage(f"dynamics_model_{setting}", params, {"data": data.digest}, f"dynamics_model_{setting}.pt",
                  "hierloco.components.com_model:TrainedCoMModel", build_dynamics_model)
 
@@ -267,8 +272,17 @@ def build_dynamics_model(run, params, data: TransitionData, low_level) -> Traine
     """The local-frame delta model ``(dx, dy, dyaw, vx', vy') = f(vx, vy, a)``, early-stopped on held-out data."""
     from hierloco.components.com_model import train_com_model
 
+    params = dict(params)
+    context = BODY_CONTEXT if params.pop("body_state", False) else {}
     features = low_level.action_features(data.action)
+    if context:  # the body state at each action's start, after the action's features (CoMWorldModelEnv's context)
+        if data.body_state is None:
+            raise ValueError(f"{run.current}: dynamics.body_state needs dynamics data that recorded the body state; "
+                             "this data was collected before it was")
+        features = np.concatenate([np.asarray(features, dtype=np.float64), data.body_state], -1)
     model = train_com_model(data.com_state, features, data.next_com_state, progress=run.progress, **params)
+    if context:
+        model.metadata["context"] = dict(context)
     setting = run.current.removeprefix("dynamics_model_")
     curves = {"heldout_loss": model.metadata["heldout_loss_history"],
               "train_loss": model.metadata["train_loss_history"]}
@@ -363,7 +377,7 @@ def evaluation_rollout(robot, params: dict, task, low_level, model: TrainedCoMMo
     from hierloco.envs.latent_env import LatentActionEnv
     from hierloco.trained import make_world_model
 
-    world_model = make_world_model(model.model, low_level, device=params["device"])
+    world_model = make_world_model(model, low_level, device=params["device"])
     planner_section = params["planner"]
     world_model.set_risk(planner_section.get("risk", "none"), planner_section.get("beta", 1.0))
     planner = make_planner(world_model, seed=params["seed"], **params["planner"])

@@ -11,7 +11,9 @@ through Ray, and on a cluster its run directory and log too, so a cluster withou
 rows are read from the evaluation artifacts its plan names (never from a loose CSV), so a run directory re-run with
 another config is run again, not misreported. With a ``records`` directory (:mod:`hierloco.pipeline.records`) every
 finished job also leaves its verified record there, and a job whose run directory is missing is taken from its
-record while its stage keys are today's: a study runs in parts, on several machines or sessions. A job that ends in
+record while its stage keys are today's: a study runs in parts, on several machines or sessions. A job may keep a
+per-action table in its record too (``Job.actions``, :func:`action_table`: e.g. the gait each latent action walked);
+a record made before its job kept one is not taken for it, the job runs again. A job that ends in
 a finding about its setting (:class:`hierloco.errors.Finding`) is not evaluable, a result rather than a failure: it
 is kept (``failed.json`` in its run directory, its record) and reported from there, not run again, while the stage it
 failed in has today's key.
@@ -66,6 +68,9 @@ class Job:
     device: str | None = None  # where its networks run (device=...; None: the recipe's default); not in its signature
     records_from: str | None = None  # another study's records directory its record may be taken from (read only:
     #                                  e.g. the comparison's full-budget runs in the sample-efficiency study)
+    actions: str | None = None  # "module:function" deriving its per-action table from its finished evaluations
+    #                             (``function(job, specs) -> rows``, kept in its record: :func:`action_table`); not in
+    #                             its signature, and a record without that table is not taken for it (the job runs)
 
     def command(self) -> list[str]:
         return [sys.executable, str(METHODS[self.method].train_script), f"run_dir={self.run_dir}",
@@ -93,6 +98,7 @@ class JobResult:
     report: dict = field(default_factory=dict)  # the run's report.json (stage wall-clocks)
     builds: dict = field(default_factory=dict)  # the run's builds.json (what building each stage took)
     recorded_seconds: float = float("nan")  # a reused job: its wall-clock when it ran
+    actions: list[dict] | None = None  # its per-action table (a job with ``Job.actions``), from wherever its rows came
 
     def __post_init__(self):
         self.source = self.source or self.job.run_dir
@@ -196,7 +202,21 @@ def run_record(job: Job, specs) -> dict:
         return done[name] if isinstance(done.get(name), dict) else _json_file(run_dir / f"{name}.json")
 
     return job_records.make_record(job.signature(), specs, rows=evaluation_rows(run_dir, specs),
-                                   report=kept("report"), builds=kept("builds"), seconds=done.get("seconds"))
+                                   report=kept("report"), builds=kept("builds"), seconds=done.get("seconds"),
+                                   actions=action_table(job, specs))
+
+
+def action_table(job: Job, specs) -> list[dict] | None:
+    """The per-action table of the job's evaluations among ``specs`` in its run directory, made by the function
+    ``job.actions`` names (``"package.module:function"``, called with the job and ``specs``: one row per latent
+    action of every evaluated episode, with its ``setting``, ``task``, ``episode`` and ``action``; e.g. the gait study's
+    :func:`hierloco.recipes.gaits.run.action_table`); ``None`` for a job that asks for none."""
+    if not job.actions:
+        return None
+    import importlib
+
+    module, _, name = job.actions.partition(":")
+    return getattr(importlib.import_module(module), name)(job, specs)
 
 
 def done_text(job: Job, seconds: float) -> str:
@@ -228,7 +248,20 @@ def recorded(job: Job, records: str, specs=None) -> dict | None:
     specs = _plan_or_none(job) if specs is None else specs
     if specs is None or record["rows"] is None or not job_records.matches(record, job.signature(), specs):
         return None
+    if job.actions and record.get("actions") is None:  # made before its job kept a per-action table: run it again
+        return None
     return record
+
+
+def _lacks_actions(job: Job, records: str, specs) -> bool:
+    """Whether ``records`` holds a current record of the job (:func:`recorded` but for this) without the per-action
+    table the job asks for (``job.actions``)."""
+    directory = job_records.record_dir(records, job.run_dir)
+    if not job.actions or specs is None or not (directory / job_records.RECORD).is_file():
+        return False
+    record = job_records.read(directory)
+    return (record["rows"] is not None and record.get("actions") is None
+            and job_records.matches(record, job.signature(), specs))
 
 
 def found(job: Job, records: str | None = None, specs=None) -> tuple[str, str, dict] | None:
@@ -418,6 +451,9 @@ def _from_records(job: Job, records: str | None, specs) -> tuple[Path, dict] | N
             directory = job_records.record_dir(root, job.run_dir)
             _check_with_run(job, specs, record, directory / job_records.RECORD)
             return directory, record
+        if root and _lacks_actions(job, root, specs):
+            print(f"study: the record {job_records.record_dir(root, job.run_dir) / job_records.RECORD} holds no "
+                  f"per-action table (it was made before its job kept one): running the job again", flush=True)
     return None
 
 
@@ -467,6 +503,7 @@ def _check_with_run(job: Job, specs, record: dict, where: Path) -> None:
     held = sorted((_measured(row) for row in record["rows"] if (row.get("setting"), row.get("task")) in groups),
                   key=order)
     if len(held) == len(derived) and all(_same_row(there, here) for there, here in zip(derived, held)):
+        _check_actions_with_run(job, present, record, where)
         return
     first = f"{len(derived)} rows there, {len(held)} in the record"
     for there, here in zip(derived, held):
@@ -483,6 +520,27 @@ def _check_with_run(job: Job, specs, record: dict, where: Path) -> None:
     raise job_records.RecordError(f"record {where}: its rows differ from the evaluations in the job's run directory "
                                   f"{job.run_dir} ({first}); the record or that run directory was edited: remove the "
                                   "one you do not trust")
+
+
+def _check_actions_with_run(job: Job, present, record: dict, where: Path) -> None:
+    """Refuses ``record`` when its per-action table differs from the one derived from the evaluations its job's
+    run directory holds with today's keys (``present``), as :func:`_check_with_run` does its rows."""
+    if not job.actions or record.get("actions") is None:
+        return
+    order = lambda row: (str(row.get("setting")), str(row.get("task")), row.get("episode", 0),  # noqa: E731
+                         row.get("action", 0))
+    derived = sorted((_measured(row) for row in action_table(job, present)), key=order)
+    groups = {(row["setting"], row["task"]) for row in derived}
+    held = sorted((_measured(row) for row in record["actions"] if (row.get("setting"), row.get("task")) in groups),
+                  key=order)
+    if len(held) == len(derived) and all(_same_row(there, here) for there, here in zip(derived, held)):
+        return
+    first = next((f"{there.get('task')} episode {there.get('episode')} action {there.get('action')}"
+                  for there, here in zip(derived, held) if not _same_row(there, here)),
+                 f"{len(derived)} actions there, {len(held)} in the record")
+    raise job_records.RecordError(f"record {where}: its per-action table differs from the evaluations in the job's "
+                                  f"run directory {job.run_dir} ({first[:200]}); the record or that run directory was "
+                                  "edited: remove the one you do not trust")
 
 
 def _another_build(record: dict, run_dir: str) -> bool:
@@ -926,7 +984,8 @@ def run_jobs(jobs: Sequence[Job], *, address: str | None = None, cores_per_job: 
                 print(f"study: {job.run_dir}: {error}; running the job again", flush=True)
         if record is not None:
             results[index] = JobResult(job, True, record["rows"], 0.0, reused=True, report=record["report"],
-                                       builds=record["builds"], recorded_seconds=_seconds(record))
+                                       builds=record["builds"], recorded_seconds=_seconds(record),
+                                       actions=record.get("actions"))
             if not dry_run:
                 _keep_record(records, job, record)
         elif specs is not None and not (Path(job.run_dir) / DONE).exists() and (
@@ -936,7 +995,7 @@ def run_jobs(jobs: Sequence[Job], *, address: str | None = None, cores_per_job: 
                 borrowed[job.records_from] = borrowed.get(job.records_from, 0) + 1
             results[index] = JobResult(job, True, recorded_job["rows"], 0.0, reused=True, source=str(source),
                                        report=recorded_job["report"], builds=recorded_job["builds"],
-                                       recorded_seconds=_seconds(recorded_job))
+                                       recorded_seconds=_seconds(recorded_job), actions=recorded_job.get("actions"))
             from_records += 1
         elif (finding := found(job, records, specs)) is not None:
             error, source, failure = finding
@@ -992,7 +1051,8 @@ def run_jobs(jobs: Sequence[Job], *, address: str | None = None, cores_per_job: 
                         print(f"study: {said}", flush=True)
                     results[index] = JobResult(job, outcome["ok"], outcome["rows"], outcome["seconds"],
                                                error=outcome["error"], finding=outcome["finding"],
-                                               report=outcome.get("report") or {}, builds=outcome.get("builds") or {})
+                                               report=outcome.get("report") or {}, builds=outcome.get("builds") or {},
+                                               actions=(outcome.get("record") or {}).get("actions"))
                     _keep_record(records, job, outcome.get("record"))
                     durations.append(outcome["seconds"])
                     finished_at = time.perf_counter()
@@ -1064,7 +1124,7 @@ def run_here(job: Job) -> list[dict]:
     return outcome["rows"]
 
 
-__all__ = ["CLUSTER_EXCLUDES", "DONE", "FORWARDED_ENV", "Job", "JobResult", "bring_back", "check_gpus_per_job",
-           "check_ray_address", "check_records", "cluster_runtime_env", "evaluation_rows", "execute", "finished",
-           "job_log", "machine_slots", "pack", "plan_text", "planned_stages", "project_root", "ray_session", "recorded",
-           "report_failures", "resolve_method", "rows_of", "run_here", "run_jobs"]
+__all__ = ["CLUSTER_EXCLUDES", "DONE", "FORWARDED_ENV", "Job", "JobResult", "action_table", "bring_back",
+           "check_gpus_per_job", "check_ray_address", "check_records", "cluster_runtime_env", "evaluation_rows",
+           "execute", "finished", "job_log", "machine_slots", "pack", "plan_text", "planned_stages", "project_root",
+           "ray_session", "recorded", "report_failures", "resolve_method", "rows_of", "run_here", "run_jobs"]

@@ -227,3 +227,31 @@ def test_diagnosis_says_how_far_off_and_in_which_direction():
     assert perfect.ok and perfect.worst_reach == pytest.approx(1.0)
     with pytest.raises(ValueError, match="min_reach must be a positive fraction"):
         diagnose_expert_library(_synthetic_library(commands.copy(), commands), min_reach=float("nan"))
+
+
+# ---------------------------------------------------------------------------------------------------- off flat ground
+def _foot_lift_m(library) -> float:
+    """The experts' median foot lift: per expert and leg, the range of the foot's height in the base frame over the
+    recorded action, from the joint targets (forward kinematics)."""
+    from hierloco.components.kinematics import LegKinematics
+
+    feet = LegKinematics("a1").forward(library.joint_targets)  # G x N x L x 3
+    return float(np.median(np.ptp(feet[..., 2], axis=1)))
+
+
+def test_experts_lift_their_feet_as_asked_and_record_the_ground_they_walked_on():
+    """``swing_height_m`` raises the experts' foot lift (A1's own is 0.06 m) and ``terrain`` is the ground they are
+    recorded on; both are in the library's metadata, the robot's fingerprint stays the robot's (docs/terrain.md)."""
+    commands = np.array([[0.2, 0.0, 0.0], [0.0, 0.1, 0.0], [-0.1, 0.0, 0.2]])
+    own = build_expert_library("a1", 3, commands=commands, settle_time=1.0, progress=False)
+    high = build_expert_library("a1", 3, commands=commands, settle_time=1.0, progress=False, swing_height_m=0.10,
+                                terrain={"name": "rough", "difficulty": 0.3})
+    assert _foot_lift_m(high) > _foot_lift_m(own) + 0.025, (_foot_lift_m(high), _foot_lift_m(own))
+    assert high.metadata["swing_height_m"] == 0.10
+    assert high.metadata["terrain"] == {"name": "rough", "difficulty": 0.3, "seed": 0}
+    assert "swing_height_m" not in own.metadata and "terrain" not in own.metadata
+    assert high.metadata["robot_fingerprint"] == own.metadata["robot_fingerprint"]
+    # on rough ground the recorded CoM paths are not the flat ones: the experts met the bumps
+    assert not np.allclose(high.com_states, own.com_states)
+    with pytest.raises(ValueError, match="swing_height_m must be a foot lift in"):
+        build_expert_library("a1", 3, commands=commands, progress=False, swing_height_m=0.5)

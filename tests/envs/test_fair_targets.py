@@ -127,3 +127,33 @@ def test_the_comparison_s_fair_jobs_run_beside_the_paper_targets_runs():
     fair = comparison_job("lat", spec, 0, preset="paper", settings=["normal"], targets="fair")
     assert paper.run_dir == "outputs/lat/paper/a1_seed0" and "targets=fair" not in paper.overrides
     assert fair.run_dir == "outputs/lat/paper_fair/a1_seed0" and "targets=fair" in fair.overrides
+
+
+@pytest.mark.parametrize("method", ["sac", "sac_sac"])
+def test_on_fair_targets_each_model_free_agent_is_evaluated_on_its_own_task_and_every_evaluation_once(method):
+    """Two main tasks of one kind (the random path and the fast path) gave two evaluation stages of one name with
+    different agents, one shadowing the other, and the SAC run stopped at its evaluations: now each agent evaluates
+    its own task, the generalisation variants go to the first agent of their kind, and a plan refuses a name given to
+    two different stages."""
+    from hierloco.pipeline.config import prepare
+    from hierloco.pipeline.methods import METHODS as RECIPES
+    from hierloco.pipeline.plan import Plan, TaskPlan
+    from hierloco.recipes.sac.utils import sac_evaluation_stage
+
+    utils = RECIPES[method].utils()
+    for targets in ("paper", "fair"):
+        cfg = compose_recipe(method, ["preset=paper", f"targets={targets}"])
+        planned = utils.plan(cfg, prepare(cfg, utils.checks))
+        names = [stage.name for stage in planned.stages()]
+        assert len(names) == len(set(names))
+        evaluated = {t.agent.name: [e.name for e in t.evaluations] for t in planned.tasks}
+        for agent, evaluations in evaluated.items():
+            assert f"evaluation_normal_{agent.removeprefix('sac_')}" == evaluations[0]
+        flat = [name for evaluations in evaluated.values() for name in evaluations]
+        assert len(flat) == len(set(flat)) == len(cfg.eval.tasks) + len(cfg.eval.generalization or {})
+    assert evaluated["sac_trajectory_tracking_fast"] == ["evaluation_normal_trajectory_tracking_fast"]
+    first = planned.tasks[0]
+    other = sac_evaluation_stage(cfg, "velocity_tracking", {"rounds": 2}, first.agent)  # another key, same name
+    twice = Plan(tasks=[first, TaskPlan("again", first.agent, [other])])
+    with pytest.raises(ValueError, match="names two different stages 'evaluation_normal_velocity_tracking'"):
+        twice.stages()

@@ -1,5 +1,7 @@
 """LAT with experts over several gaits (``experts.gaits``): one gait policy and latent space over all of them."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -9,7 +11,7 @@ from hierloco.recipes.gaits.run import (
     action_speeds, decide_needed_gait, needed_at, needed_gait_shares, profile_markdown, segments,
 )
 from tests.recipes.test_device_keys import changed, plan
-from tests.runner import run_in_process, run_subprocess
+from tests.runner import ROOT, run_in_process, run_subprocess
 
 GAITS = "experts.gaits={trot: [[FR, RL], [FL, RR]], pace: [[FR, RR], [FL, RL]]}"
 
@@ -187,3 +189,106 @@ def test_the_profile_page_says_which_targets_need_a_gait_and_the_test():
     assert "The gait the task needs" not in profile_markdown(found, [], {"ripple": 0, "tripod": 0},
                                                               own="own", several="2 gaits", title="daisy")
     assert needed_gait_shares([{**r, "needed": "ripple|tripod"} for r in found], "2 gaits") == {}
+
+
+# --- the per-action table in a job's record (the gait claim rebuilt from records) -------------------------------------
+
+PROFILE_GAITS = "+gaits={trot: [[FR, RL], [FL, RR]], pace: [[FR, RR], [FL, RL]]}"
+SLOW_PACE = "+gait_boxes={pace: {command_low: [-0.1, -0.1, -0.2], command_high: [0.1, 0.1, 0.2]}}"
+
+
+@pytest.fixture(scope="module")
+def profiled(tmp_path_factory):
+    """The gait study's several-gait profile job on A1 at the tiny preset (trot, and a pace that walks only up to
+    0.14 m/s: the profile's 0.15 and 0.30 m/s targets need the trot), run once in this process and finished as a
+    study's job leaves it; then taken by the study as it takes a finished job (:func:`studies.run_jobs`, no job to
+    run: no Ray), which writes its record, and the study's ``profile.csv`` written from the result."""
+    from hydra import compose, initialize_config_dir
+
+    from hierloco.pipeline import studies
+    from hierloco.recipes.gaits import run
+
+    root = tmp_path_factory.mktemp("gait_records")
+    with initialize_config_dir(config_dir=str(ROOT / "recipes" / "gaits"), version_base=None):
+        cfg = compose(config_name="config", overrides=[
+            "preset=tiny", "seeds=[0]", "compare_records=null", "~gaits", PROFILE_GAITS, SLOW_PACE, "tag=slow",
+            f"runs_dir={root / 'outputs' / 'gaits' / 'tiny'}", f"records={root / 'records'}"])
+    spec = run.check(cfg)
+    _, profile_jobs = run.jobs(cfg, spec)
+    job = next(j for j in profile_jobs if j.labels["method"] == "2 gaits")
+    result = run_in_process("lat", f"run_dir={job.run_dir}", *job.overrides, cwd=root)
+    assert result.returncode == 0, result.stderr[-3000:]
+    (Path(job.run_dir) / studies.DONE).write_text(studies.done_text(job, 10.0))
+    [taken] = studies.run_jobs([job], records=cfg.records)
+    assert taken.ok and taken.reused and taken.actions is not None
+    run.write_profile(cfg, spec, [taken], root / "out", own="own gait (trot)", several="2 gaits")
+    return cfg, job, root
+
+
+def test_a_gait_study_job_keeps_each_actions_gait_and_target_in_its_record(profiled):
+    """The record holds, per action of the profile episode, the gait its foot contacts walked (as
+    ``classify_actions`` reads them from the evaluation), its target speed and the gaits that reach it."""
+    from hierloco.components.gaits import classify_actions
+    from hierloco.pipeline import records
+    from hierloco.recipes.gaits.run import evaluation_arrays, gait_context
+
+    cfg, job, _ = profiled
+    record = records.read(records.record_dir(cfg.records, job.run_dir))  # verified as it is read
+    table = record["actions"]
+    assert [(a["setting"], a["task"], a["episode"], a["action"]) for a in table] == [
+        ("normal", "speed_profile", 0, a) for a in range(25)]
+    assert [a["target_speed"] for a in table] == [0.05] * 5 + [0.15] * 5 + [0.3] * 5 + [0.15] * 5 + [0.05] * 5
+    assert [a["needed"] for a in table] == ["pace|trot" if a["target_speed"] == 0.05 else "trot" for a in table]
+    legs, steps = gait_context(job)
+    contacts = evaluation_arrays(job, "speed_profile")["foot_contacts"][0]
+    assert [a["gait"] for a in table] == classify_actions(contacts, steps, {"trot": [["FR", "RL"], ["FL", "RR"]],
+                                                                            "pace": [["FR", "RR"], ["FL", "RL"]]}, legs)
+    assert {a["gait"] for a in table} <= {"trot", "pace"}
+    assert all(isinstance(a["speed"], float) for a in table)
+
+
+def test_the_gait_claim_from_the_records_is_the_one_from_the_profile_table_the_run_wrote(profiled):
+    """``hierloco verdicts`` reads the claim from the profile table made again from the records
+    (``profile_from_records``): the same rows, and the same check, as from the ``profile.csv`` the study wrote."""
+    from hierloco.recipes.gaits.claims import gait_checks
+    from hierloco.recipes.gaits.run import profile_from_records
+
+    cfg, _, root = profiled
+    written = read_csv(root / "out" / "profile.csv")
+    rebuilt, lacking = profile_from_records(cfg.records, robot="a1", tag="slow", preset="tiny")
+    assert lacking == [] and len(rebuilt) == len(written) == 25
+    assert [{k: str(v) for k, v in row.items()} for row in rebuilt] == [
+        {k: str(v) for k, v in row.items()} for row in written]
+    from_table = gait_checks([{**row, "robot": "a1"} for row in written])
+    from_records = gait_checks([{**row, "robot": "a1"} for row in rebuilt])
+    assert len(from_table) == 1 and from_records == from_table
+    assert from_records[0].ours.startswith("the needed gaits' share") and "0.15 m/s: trot" in from_records[0].ours
+    # another study's records (another tag, another preset) are not this one's
+    assert profile_from_records(cfg.records, robot="a1", tag=None, preset="tiny") == ([], [])
+    assert profile_from_records(cfg.records, robot="a1", tag="slow", preset="paper") == ([], [])
+
+
+def test_a_job_is_taken_from_its_record_with_its_table_and_run_again_without_one(profiled, tmp_path, capsys):
+    """Elsewhere (no run directory) the study takes the job from its record, per-action table and all; a record
+    made before jobs kept the table (the same record without it: it verifies) is not taken: the job is to run."""
+    import dataclasses
+    import shutil
+
+    from hierloco.pipeline import records, studies
+
+    cfg, job, _ = profiled
+    elsewhere = dataclasses.replace(job, run_dir=str(tmp_path / "gaits" / "tiny" / Path(job.run_dir).name),
+                                    reuse_from=None)
+    kept = records.read(records.record_dir(cfg.records, job.run_dir))
+    [taken] = studies.run_jobs([dataclasses.replace(elsewhere)], records=cfg.records)
+    assert taken.ok and taken.source != elsewhere.run_dir and taken.actions == kept["actions"]
+    older = tmp_path / "records"
+    shutil.copytree(cfg.records, older)
+    where = records.record_dir(older, job.run_dir)
+    records.save(records.make_record(kept["signature"], studies.planned_stages(job), rows=kept["rows"],
+                                     report=kept["report"], builds=kept["builds"], seconds=kept["seconds"]), where)
+    assert "actions" not in records.read(where)
+    with pytest.raises(SystemExit):
+        studies.run_jobs([dataclasses.replace(elsewhere)], records=str(older), dry_run=True)
+    out = capsys.readouterr().out
+    assert f"the record {where / records.RECORD} holds no per-action table" in out and "0 finished, 1 to run" in out

@@ -65,6 +65,53 @@ def test_an_edited_or_incomplete_record_is_refused_naming_the_file(tmp_path):
         records.read(target)
 
 
+EPISODES = [{"method": "lat", "robot": "daisy", "setting": "normal", "task": "speed_profile", "seed": 0, "episode": e,
+             "normalized_cost": 0.2} for e in range(2)]
+ACTIONS = [{"setting": "normal", "task": "speed_profile", "episode": e, "action": a, "target_speed": 0.3,
+            "speed": float("nan") if a == 1 else 0.29, "gait": "nan" if a == 2 else "tripod", "needed": "tripod"}
+           for e in range(2) for a in range(3)]
+
+
+def _forged(target, change) -> None:
+    """The record in ``target`` edited and its digest recomputed (what only its checks against itself can see)."""
+    path = target / records.RECORD
+    record = json.loads(path.read_text())
+    change(record)
+    record["digest"] = records._digest({k: v for k, v in record.items() if k not in ("digest", records.MAC)})
+    path.write_text(json.dumps(record))
+
+
+def test_a_per_action_table_is_sealed_and_checked_and_a_record_without_one_is_as_before(tmp_path):
+    """A job's per-action table (the gait study's: each action's gait) is part of its record, under its digest and
+    checked against its rows when read; a record without one has no such field and the digest it had before tables
+    existed (the value below: this record made by the code before them), so every committed record verifies."""
+    before = records.make_record(SIGNATURE, specs(), rows=ROWS, report={"stage_seconds": {"model": 1.0}},
+                                 builds={"model": {"seconds": 3.0}}, seconds=12.0)
+    assert "actions" not in before
+    assert before["digest"] == "24e2e57882facb00033af7a0733bceda28bada690e789a9134eff64be546f55b"
+    target = tmp_path / "rec"
+    records.save(records.make_record(SIGNATURE, specs(), rows=EPISODES, actions=ACTIONS), target)
+    read = records.read(target)
+    assert [(a["episode"], a["action"], a["gait"]) for a in read["actions"]] == [
+        (e, a, "nan" if a == 2 else "tripod") for e in range(2) for a in range(3)]  # a gait is a name, never a NaN
+    assert read["actions"][1]["speed"] != read["actions"][1]["speed"]  # a NaN speed stays NaN
+    path = target / records.RECORD
+    text = path.read_text()
+    path.write_text(text.replace('"gait": "tripod"', '"gait": "ripple"', 1))
+    with pytest.raises(records.RecordError, match=f"record {path} was edited"):
+        records.read(target)
+    path.write_text(text)
+    _forged(target, lambda record: record["actions"][0].update(episode=5))
+    with pytest.raises(records.RecordError, match="action row 0 is of normal/speed_profile episode 5, which no row"):
+        records.read(target)
+    path.write_text(text)
+    _forged(target, lambda record: record["actions"].pop(4))  # episode 1 loses its action 1
+    with pytest.raises(records.RecordError, match="actions of normal/speed_profile episode 1 are numbered \\[0, 2\\]"):
+        records.read(target)
+    path.write_text(text)
+    assert len(records.read(target)["actions"]) == len(ACTIONS)  # as written, it verifies again
+
+
 def test_saving_a_record_deletes_nothing(tmp_path):
     target = tmp_path / "rec"
     target.mkdir()

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 
 from tests.recipes.stage_plans import changed, plan
 from tests.runner import run_in_process, run_subprocess
@@ -203,3 +204,96 @@ def test_the_terrain_study_refuses_bad_configs_and_missing_trained_runs_before_a
     assert missing.returncode == 2 and len(missing.lines) == 1, missing.stderr
     assert "the terrain study trains nothing" in missing.lines[0] and "no finished experts" in missing.lines[0]
     assert not runs.exists()
+
+
+# ---------------------------------------------------------------------------------------------------- LAT made for terrain
+def test_lat_made_for_terrain_keys_exactly_the_stages_it_changes():
+    """The experts' foot lift and ground change every stage (all stand on the experts), a CoM model that reads the
+    body state changes the model and the evaluations; their defaults change nothing."""
+    lat = plan("lat")
+    assert not changed("lat", "experts.swing_height_m=null", "dynamics.body_state=false")
+    assert changed("lat", "experts.swing_height_m=0.1") == set(lat)
+    assert changed("lat", "dynamics.body_state=true") == {"dynamics_model_normal"} | evaluations(lat)
+    keyed = plan("lat", "experts.swing_height_m=0.1", "dynamics.body_state=true")
+    assert keyed["experts"].params["swing_height_m"] == 0.1
+    assert keyed["dynamics_model_normal"].params["body_state"] is True
+
+
+@pytest.mark.parametrize("override, said", [
+    ("experts.swing_height_m=0.5", "experts.swing_height_m must be a foot lift in m"),
+    ("dynamics.body_state=sometimes", "dynamics.body_state must be true or false"),
+])
+def test_lat_made_for_terrain_refuses_bad_options_in_one_line(tmp_path, override, said):
+    run_dir = tmp_path / "run"
+    result = run_in_process("lat", "preset=tiny", f"run_dir={run_dir}", override)
+    assert result.returncode == 2 and len(result.lines) == 1 and said in result.lines[0], result.lines
+    assert not run_dir.exists()
+
+
+def test_a_tiny_lat_run_made_for_terrain_plans_with_the_body_state_on_mild_rough_ground(tmp_path):
+    """Experts with a higher foot lift, a CoM model that reads roll, pitch and height:
+    trained and evaluated on mild rough ground, it plans with the body state the env measures, reaches goals and
+    does not fall; the exporter refuses the model in one line rather than export it without its inputs."""
+    from hierloco.trained import load_run
+
+    run_dir = tmp_path / "run"
+    result = run_in_process("lat", "preset=tiny", f"run_dir={run_dir}", "progress=false", "eval.videos=[]",
+                            "eval.figures=false", "logger.backends=[csv]", "experts.swing_height_m=0.1",
+                            "dynamics.body_state=true",
+                            "terrain=rough", "terrain.difficulty=0.2")
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    run = load_run(run_dir)
+    model = run.com_model("normal")
+    assert model.metadata["context"] == {"body_state": 3}
+    assert model.model.action_dim == run.low_level().action_dim + 3
+    assert run.world_model().measured_keys[-1] == "body_state"
+    # the trained model's prediction depends on the pitch it is given
+    world = run.world_model()
+    start = world.initial_state(torch.zeros(2, 5)).set("action", torch.full((2, run.low_level().action_dim), 0.5))
+    start["body_state"] = torch.tensor([[0.0, 0.0, 0.27], [0.0, 0.3, 0.15]])
+    moved = world.step(start)["next", "com_state"]
+    assert not torch.allclose(moved[0], moved[1])
+    rows = list(csv.DictReader((run_dir / "episodes.csv").open()))
+    goals = [r for r in rows if r["task"] == "goal_reaching"]
+    costs = [float(r["normalized_cost"]) for r in goals]
+    # it walks towards the goals at this tiny scale (8 experts, 1,000 transitions): well below standing still's cost
+    # on average (0.67 when written), some goals reached (3 of 8 then), no fall
+    assert len(goals) == 8 and np.mean(costs) < 0.85 and sum(float(r["success"]) for r in goals) >= 2, costs
+    from hierloco.results import TaskEvaluation
+
+    evaluated = [TaskEvaluation.load(path) for path in (run_dir / "evaluation" / "normal").glob("goal_reaching-*.npz")]
+    assert len(evaluated) == 1 and evaluated[0].metadata["terrain"]["name"] == "rough"
+    assert evaluated[0].metrics["fall_rate"] == 0.0
+    from hierloco.exporting import export_run
+    from hierloco.io import ArtifactError
+
+    with pytest.raises(ArtifactError, match="does not carry such a model yet"):
+        export_run(run_dir, tmp_path / "export")
+    assert not (tmp_path / "export").exists()
+
+
+def test_the_terrain_study_judges_each_lat_variant_against_plain_lat_paired_by_seed():
+    """``variants.md``: a variant of the ``lat`` recipe against plain LAT at each terrain and difficulty, by the
+    paired test over seeds; other methods are not variants of LAT; the small preset's null generalisation tasks are
+    set, not deleted (the jobs' overrides compose)."""
+    from hierloco.pipeline.config import compose_recipe
+    from hierloco.recipes.terrain import run as terrain
+    from hydra import compose, initialize_config_dir
+
+    with initialize_config_dir(config_dir=str(Path(terrain.__file__).parent), version_base=None):
+        cfg = compose("config", overrides=["preset=small", "methods=[lat,lat_body,lat_clearance,lib]"])
+    assert terrain.lat_variants(cfg) == ["lat_body", "lat_clearance"]
+    rows = []
+    for seed, base in enumerate([0.50, 0.62, 0.41]):
+        for method, cost in (("lat", base), ("lat_body", base - 0.15), ("lat_clearance", base + 0.002)):
+            rows += [{"method": method, "robot": "a1", "setting": "normal", "task": "goal_reaching_rough075",
+                      "seed": seed, "episode": e, "normalized_cost": cost, "push_mps": 0.0} for e in range(2)]
+    text = terrain.variants_markdown(rows, cfg, title="small preset")
+    line = {cells.split(" | ")[3]: cells for cells in text.splitlines() if cells.startswith("| a1 | normal | ")}
+    assert line["lat_body"].split(" | ")[4].startswith("holds")            # 0.15 lower at every seed
+    assert line["lat_clearance"].split(" | ")[5].startswith("holds")       # within the margin at every seed
+    assert "`lat_body`: dynamics.body_state=true" in text
+    jobs = terrain.generalization_overrides("lat", "small", {"x_rough050": {"task": "goal_reaching"}})
+    assert jobs == ["eval.generalization={x_rough050: {task: goal_reaching}}"]
+    assert compose_recipe("lat", ["preset=small", *jobs]).eval.generalization.x_rough050.task == "goal_reaching"
+    assert terrain.generalization_overrides("lat", "paper", {"x": {"task": "goal_reaching"}})[0] == "~eval.generalization"

@@ -168,28 +168,83 @@ def test_latent_continuity_is_decided_over_seeds_from_the_stage_s_reports(tmp_pa
     assert "(no runs of the study it needs: `latent_map`)" not in paper
 
 
-def test_the_gait_a_target_needs_is_decided_from_the_gait_study_s_profile_table(tmp_path):
+def gait_records(results, found, *, tables=True):
+    """The gait study's profile records of Daisy (``results/gaits/records``), one per seed of ``found`` (profile
+    rows of the several-gait library, ``test_gaits_recipe.profile_found``) and its own gait's, as the study keeps
+    them: each with its per-action table, or (``tables=False``) as records made before the study kept one."""
+    from hierloco.pipeline import records
+    from hierloco.pipeline.rundir import StageSpec
+
+    gaits = {"ripple": [["FL", "MR"], ["ML", "RR"], ["RL", "FR"]], "tripod": [["FL", "MR", "RL"], ["FR", "ML", "RR"]]}
+    for seed in sorted({r["seed"] for r in found}):
+        mine = [r for r in found if r["seed"] == seed]
+        for name, library, gait in ((f"daisy_seed{seed}_speeds_profile", gaits, None),
+                                    (f"daisy_seed{seed}_own_profile", None, "")):
+            evaluation = StageSpec("evaluation_normal_speed_profile", {"params": {
+                "setting": "normal", "task_name": "speed_profile", "seed": seed}, "after": {"of": name}},
+                "evaluation/normal/speed_profile-0123456789ab.npz")
+            experts = StageSpec("experts", {"params": {"seed": seed, **({"gaits": library} if library else {})}},
+                                "experts.npz")
+            rows = [{"method": "lat", "robot": "daisy", "setting": "normal", "task": "speed_profile", "seed": seed,
+                     "episode": 0, "normalized_cost": 0.2, "success": float("nan"), "final_error": 0.1}]
+            table = [{"setting": "normal", "task": r["task"], "episode": r["episode"], "action": r["action"],
+                      "target_speed": r["target_speed"], "speed": r["speed"],
+                      **({"gait": r["gait"], "needed": r["needed"]} if library else {"gait": gait})} for r in mine]
+            overrides = ["preset=paper", "robot=daisy", f"seed={seed}", *([f"experts.gaits={gaits}"] if library else [])]
+            records.save(records.make_record({"method": "lat", "overrides": overrides}, [experts, evaluation],
+                                             rows=rows, actions=table if tables else None),
+                         results / "gaits" / "records" / "gaits" / "paper" / name)
+
+
+def test_the_gait_a_target_needs_is_decided_from_the_gait_study_s_records(tmp_path):
     """A speed profile whose fast target only the tripod reaches: the tripod walked at 90-100 % of the actions there
-    and at 20-40 % elsewhere holds; the same share everywhere does not. Read from the gait study's table."""
-    from hierloco.results import csv_text
+    and at 20-40 % elsewhere holds; the same share everywhere does not. Read from the per-action tables of the gait
+    study's profile records, the profile table made again from them."""
     from tests.recipes.test_gaits_recipe import profile_found
 
     results = results_tree(tmp_path / "results")
     paper = pages(load(results))["paper_check.md"]
-    assert "(no runs of the study it needs: `gaits`)" in paper
-    table = results / "gaits" / "daisy_speeds" / "profile.csv"
-    table.parent.mkdir(parents=True)
+    section = paper[paper.index('"Our learned latent space can induce gait transitions'):]
+    assert section.split("\n## ")[0].count("**not measured yet** (the per-action table of the gait study's") == 1
     for fast, slow, verdict in (((1.0, 0.9, 1.0), (0.3, 0.4, 0.2), "**holds**"),
                                 ((0.5, 0.6, 0.5), (0.5, 0.5, 0.6), "**does not hold**")):
-        found = profile_found(fast, slow)
-        table.write_text(csv_text(found, list(found[0])))
-        written = pages(load(results))
+        gait_records(results, profile_found(fast, slow))
+        evidence = load(results)
+        assert {r["method"] for r in evidence.rows["gaits/daisy_speeds"]} == {"2 gaits", "own gait (tripod)"}
+        written = pages(evidence)
         row = next(line for line in written["paper_check.md"].splitlines() if "| speed profile |" in line)
         assert row.startswith("| daisy | normal | speed profile | The planner picks the gait a target needs")
         assert verdict in row and row.endswith("| gaits/daisy_speeds |"), row
         assert "gaits/daisy_speeds/verdicts.md" in written
     study = written["gaits/daisy_speeds/verdicts.md"]
-    assert "0.30 m/s: tripod" in study and "n=3; 2 gaits" in study and "no records" in study
+    assert "0.30 m/s: tripod" in study and "n=3; 2 gaits" in study and "results/gaits/records" in study
+
+
+def test_records_without_the_per_action_table_leave_the_gait_claim_not_measured_yet(tmp_path, capsys):
+    """The gait study's records made before it kept each action's gait (every one, or one seed's): the claim is
+    "not measured yet" and says what it needs, the study's command run again; no verdict, no traceback."""
+    from hierloco.pipeline import records
+    from hierloco.recipes.gaits.claims import COMMAND
+    from tests.recipes.test_gaits_recipe import profile_found
+
+    results = results_tree(tmp_path / "results")
+    found = profile_found((1.0, 0.9, 1.0), (0.3, 0.4, 0.2))
+    for older in ([0, 1, 2], [2]):
+        gait_records(results, found)
+        gait_records(results, [r for r in found if r["seed"] in older], tables=False)
+        assert "actions" not in records.read(results / "gaits" / "records" / "gaits" / "paper" /
+                                             f"daisy_seed{older[0]}_speeds_profile")
+        written = pages(load(results))
+        paper = written["paper_check.md"]
+        section = paper[paper.index('"Our learned latent space can induce gait transitions'):].split("\n## ")[0]
+        assert "**not measured yet** (the per-action table of the gait study's profile jobs" in section
+        assert f"run the study again, `{COMMAND}`" in section
+        assert "| speed profile |" not in section and "**holds**" not in section  # no verdict on what is there
+        study = written["gaits/daisy_speeds/verdicts.md"]
+        assert "| not measured | not measured yet: " in study and "without a per-action table (" in study
+        assert f"daisy_seed{older[0]}_speeds_profile" in study and COMMAND in study
+    assert main(["--results", str(results)]) == 0 and main(["--results", str(results), "--check"]) == 0
+    assert "Traceback" not in capsys.readouterr().err
 
 
 TOY_CLAIMS = '''

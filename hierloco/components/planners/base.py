@@ -219,7 +219,8 @@ class BoxPlannerBase(MPCPlannerBase, TaskPolicy):
             if self.compile and hasattr(self.env, "imagined_return"):
                 return self._compiled_return()(
                     tensordict.get("com_state"), tensordict.get(self.episode_key), tensordict.get(self.step_key),
-                    actions.round().long() if self.discrete else actions)
+                    actions.round().long() if self.discrete else actions,
+                    *(tensordict.get(key) for key in getattr(self.env, "context", ())))
             batch, count = actions.shape[:2]
             td = tensordict.select(*self.in_keys).unsqueeze(-1).expand(batch, count).clone()
             total = torch.zeros(batch, count, device=actions.device)

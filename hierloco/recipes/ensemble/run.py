@@ -99,40 +99,11 @@ def paired_table(rows: list[dict], methods: list[str], tasks) -> str:
 
 
 def verdict_table(rows: list[dict], methods: list[str], tasks) -> str:
-    """Per robot, setting and task, each ensemble variant against the MLP by the stated tests over seeds, paired by
-    seed (``docs/statistics.md``): "better" (a lower cost by at least the minimum effect) and "close" (within the
-    equivalence margin); then how many places each variant is better, close, or worse."""
-    from hierloco.stats import decide_better, decide_close
-    from hierloco.claims import seed_means
+    """Per robot, setting and task, each ensemble variant against the MLP (``methods[0]``) by the stated tests over
+    seeds, paired by seed (:func:`hierloco.claims.variant_verdicts`)."""
+    from hierloco.claims import variant_verdicts
 
-    lines = ["| robot | setting | task | variant | better than the MLP? | as good as the MLP (close)? |",
-             "|---|---|---|---|---|---|"]
-    tally: dict = {}
-    places = sorted({(r["robot"], r["setting"], r["task"]) for r in rows if r["task"] in tasks})
-    for robot, setting, task in places:
-        for method in methods[1:]:
-            pairs = []
-            for seed in sorted({r["seed"] for r in rows}):
-                of_seed = [r for r in rows if r["seed"] == seed]
-                pairs.append(tuple(seed_means(of_seed, method=m, robot=robot, setting=setting, task=task)
-                                   for m in (method, "mlp")))
-            pairs = [(a[0], b[0]) for a, b in pairs if a.size and b.size]
-            if not pairs:
-                continue
-            a, b = (np.array(x) for x in zip(*pairs))
-            better, close = decide_better(a, b, paired=True), decide_close(a, b, paired=True)
-            worse = decide_better(b, a, paired=True)
-            word = ("better" if better.verdict == "holds" else "worse" if worse.verdict == "holds"
-                    else "close" if close.verdict == "holds" else "not testable" if "testable" in close.verdict
-                    else "undecided")
-            tally.setdefault(method, {}).setdefault(word, 0)
-            tally[method][word] += 1
-            lines.append(f"| {robot} | {setting} | {task} | {method} | {better.text()} | {close.text()} |")
-    lines += ["", "| variant | better | close | worse | not testable | undecided |", "|---|---|---|---|---|---|"]
-    for method, counts in tally.items():
-        lines.append(f"| {method} | " + " | ".join(str(counts.get(w, 0)) for w in
-                                                  ("better", "close", "worse", "not testable", "undecided")) + " |")
-    return "\n".join(lines) + "\n"
+    return variant_verdicts(rows, methods[0], methods[1:], tasks, reference_name="the MLP")
 
 
 def calibration_rows(cfg, results) -> list[dict]:

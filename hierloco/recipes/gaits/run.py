@@ -8,11 +8,16 @@ Per seed: the comparison's LAT job (the robot's own gait; its run directory or i
 :func:`recipes.compare.run.comparison_job`) and LAT with ``experts.gaits`` (``docs/gaits.md``: the experts split
 between the gaits, one gait policy and latent space over all). Every latent action the planner executed in the
 several-gait runs is labelled with its gait from the foot contacts the evaluation recorded
-(:func:`hierloco.components.gaits.classify_actions`, the artifacts the plan names, their keys checked). Writes in
+(:func:`hierloco.components.gaits.classify_actions`, the artifacts the plan names, their keys checked): each
+several-gait and profile job keeps its *per-action table* (:func:`action_table`: per action of every evaluated
+episode its gait, its velocity target's speed and the CoM's speed along it) in its record (``records``,
+:mod:`hierloco.pipeline.records`), and the tables below are made from those tables, so a job taken from its record
+counts as one run here; a record made before jobs kept the table is not taken: the job runs again. Writes in
 ``out_dir``: ``gaits.csv`` (one row per action: seed, task, episode, action, gait), ``gaits.md`` (per task: the share
 of actions in each gait, switches per episode; the cost of both libraries per task with the test of "several gaits
 cost as little as the own gait", ``docs/statistics.md``), ``gait_<task>_episode<k>.png`` (gait diagrams of the
-episodes with the most switches, first seed), ``costs.csv`` / ``costs.md`` / ``wallclock.md``.
+episodes with the most switches, of the first several-gait run whose run directory is here), ``costs.csv`` /
+``costs.md`` / ``wallclock.md``.
 
 With ``profile`` (a task that needs a change of speed: forward velocity targets from slow to fast and back), each
 library's trained run is also evaluated on it alone, starting from its trained stages (the own gait's from
@@ -22,8 +27,10 @@ each library; where the switches fall; per seed, the gaits at the fastest target
 ``gait_<task>_profile.png`` (the first seed's actions around the fastest target).
 
 With ``gait_boxes`` (a gait's own command box, ``experts.gait_boxes``: e.g. a ripple that walks only slowly) some
-targets of the profile need a gait: each ``profile.csv`` row names the gaits that reach its target (``needed``) and
-``profile.md`` tests "the planner picks the gait a target needs" (:func:`decide_needed_gait`); ``tag`` names the
+targets of the profile need a gait: each several-gait ``profile.csv`` row names the gaits that reach its target
+(``needed``; empty in the own gait's rows) and ``profile.md`` tests "the planner picks the gait a target needs"
+(:func:`decide_needed_gait`; ``hierloco verdicts`` decides the paper's claim from the same table made from the
+profile jobs' records, :func:`profile_from_records`); ``tag`` names the
 several-gait run directories (``<robot>_seed<seed>_<tag>``) so that such a library's runs sit beside the others:
 
     hierloco study gaits robot=daisy own=tripod '~gaits' \
@@ -47,8 +54,30 @@ from hierloco.pipeline.study import (
 from hierloco.recipes.compare.run import comparison_job
 
 
+ACTIONS = "hierloco.recipes.gaits.run:action_table"  # the per-action table the study's jobs keep in their records
+
+
 def gaits_of(cfg) -> dict:
     return OmegaConf.to_container(cfg.gaits, resolve=True) if cfg.gaits is not None else {}
+
+
+def several_label(gaits) -> str:
+    """The several-gait library's name in the tables, e.g. ``"2 gaits"``."""
+    return f"{len(gaits)} gaits"
+
+
+def own_label(own: str | None) -> str:
+    """The own gait's library's name in the tables, e.g. ``"own gait (tripod)"``."""
+    return f"own gait ({own})" if own else "own gait"
+
+
+def run_names(robot: str, seed: int, tag: str | None = None) -> dict[str, str]:
+    """The names of one seed's run directories (below ``runs_dir``): the several-gait run (``several``:
+    ``<robot>_seed<seed>[_<tag>]``) and the profile jobs (``several_profile``: its name with ``_profile``;
+    ``own_profile``: ``<robot>_seed<seed>_own_profile``). Their records lie under the same names."""
+    several = f"{robot}_seed{seed}{f'_{tag}' if tag else ''}"
+    return {"several": several, "several_profile": f"{several}_profile",
+            "own_profile": f"{robot}_seed{seed}_own_profile"}
 
 
 def check(cfg):
@@ -124,20 +153,21 @@ def jobs(cfg, spec) -> tuple[list, list]:
     """The study's jobs, and its speed-profile jobs (none when ``profile`` is null). Per seed: the own gait's
     comparison job, the several-gait job; then each evaluated on the profile alone, starting from its trained stages
     (the several-gait job's run directory; for the own gait, ``own_runs`` when set, else the comparison's run
-    directory), so a profile job trains nothing its source holds."""
+    directory), so a profile job trains nothing its source holds. Every job but the comparison's keeps its
+    per-action table in its record (:data:`ACTIONS`)."""
     planned, profiled = [], []
-    label = f"{len(gaits_of(cfg))} gaits"
+    label = several_label(gaits_of(cfg))
     profile = profile_of(cfg)
-    tag = f"_{cfg.tag}" if cfg.get("tag") else ""  # the several-gait runs' directories, e.g. daisy_seed0_speeds
     boxes = [f"experts.gait_boxes={override_value(dict(sorted(boxes_of(cfg).items())))}"] if boxes_of(cfg) else []
     for seed in cfg.seeds:
+        names = run_names(spec.name, seed, cfg.get("tag"))  # e.g. daisy_seed0_speeds: tag names a library's runs
         own = comparison_job("lat", spec, seed, preset=cfg.preset_name, settings=["normal", "legs_disabled"])
-        own.labels, own.records_from = {"method": f"own gait ({cfg.own})"}, cfg.compare_records
-        several = studies.Job("lat", str(Path(cfg.runs_dir) / f"{spec.name}_seed{seed}{tag}"),
+        own.labels, own.records_from = {"method": own_label(cfg.own)}, cfg.compare_records
+        several = studies.Job("lat", str(Path(cfg.runs_dir) / names["several"]),
                               [f"preset={cfg.preset_name}", f"robot={spec.reference}", f"seed={seed}",
                                "settings=[normal]", "progress=false", *cfg.overrides, gaits_override(gaits_of(cfg)),
                                *boxes],
-                              labels={"method": label})
+                              labels={"method": label}, actions=ACTIONS)
         planned += [own, several]
         if not profile:
             continue
@@ -146,34 +176,80 @@ def jobs(cfg, spec) -> tuple[list, list]:
         own_source = (cfg.own_runs.format(robot=spec.name, seed=seed) if cfg.get("own_runs") else own.run_dir)
         own_normal = comparison_job("lat", spec, seed, preset=cfg.preset_name, settings=["normal"])
         profiled += [
-            studies.Job("lat", str(Path(cfg.runs_dir) / f"{spec.name}_seed{seed}_own_profile"),
-                        [*own_normal.overrides, *on_profile], labels=dict(own.labels), reuse_from=own_source),
-            studies.Job("lat", str(Path(cfg.runs_dir) / f"{spec.name}_seed{seed}{tag}_profile"),
-                        [*several.overrides, *on_profile], labels=dict(several.labels), reuse_from=several.run_dir)]
+            studies.Job("lat", str(Path(cfg.runs_dir) / names["own_profile"]),
+                        [*own_normal.overrides, *on_profile], labels=dict(own.labels), reuse_from=own_source,
+                        actions=ACTIONS),
+            studies.Job("lat", str(Path(cfg.runs_dir) / names["several_profile"]),
+                        [*several.overrides, *on_profile], labels=dict(several.labels), reuse_from=several.run_dir,
+                        actions=ACTIONS)]
     return planned, profiled
 
 
-def evaluation_arrays(job, task: str) -> dict:
-    """The arrays of the job's evaluation of ``task`` in the normal setting: the artifact its plan names, checked
-    against its key first."""
+def evaluation_arrays(job, task: str, spec=None) -> dict:
+    """The arrays of the job's evaluation of ``task`` in the normal setting (or of the evaluation stage ``spec``):
+    the artifact its plan names, checked against its key first."""
     from hierloco.io import load_arrays
     from hierloco.pipeline.rundir import RunDirectory
 
     directory = RunDirectory(job.run_dir, readonly=True)
-    spec = {spec.name: spec for spec in studies.planned_stages(job)}[f"evaluation_normal_{task}"]
+    if spec is None:
+        spec = {spec.name: spec for spec in studies.planned_stages(job)}[f"evaluation_normal_{task}"]
     if not directory.check(spec.name, spec.key, spec.filename):
         raise FileNotFoundError(f"{job.run_dir}: the evaluation {spec.filename} is not there")
     return load_arrays(directory.path / spec.filename)[0]
 
 
-def action_gaits(job, tasks, gaits: dict) -> dict[str, list[list[str]]]:
-    """Per task, the gait of each action of each episode the job's evaluation recorded (its plan's artifacts, each
-    checked against its key first)."""
-    from hierloco.components.gaits import classify_actions
+def action_table(job, specs) -> list[dict]:
+    """The job's per-action table (:attr:`hierloco.pipeline.studies.Job.actions`, kept in its record): one row per
+    latent action of every episode of each evaluation among ``specs`` (its plan's artifacts, each checked against its
+    key first): ``setting``, ``task``, ``episode``, ``action``; ``gait``, the gait its foot contacts walked
+    (:func:`hierloco.components.gaits.classify_actions` over the job's ``experts.gaits``; empty for a library of the
+    robot's own gait); for a velocity task ``target_speed`` (m/s, the action's target) and ``speed`` (m/s, the CoM's
+    mean velocity along it, :func:`action_speeds`), NaN for other tasks; with ``experts.gait_boxes``, ``needed``: the
+    gaits whose box reaches the target (:func:`needed_at`, empty for other tasks)."""
+    import torch
 
-    legs, steps = gait_context(job)
-    return {task: [classify_actions(contacts, steps, gaits, legs)
-                   for contacts in evaluation_arrays(job, task)["foot_contacts"]] for task in tasks}
+    from hierloco.components.gaits import classify_actions
+    from hierloco.envs.robots import get_robot
+    from hierloco.pipeline.config import compose_recipe, make_task_from_spec
+
+    cfg = compose_recipe(job.method, [f"run_dir={job.run_dir}", *job.runtime_overrides(), *job.overrides])
+    robot = get_robot(cfg.robot)
+    legs, steps = [leg.name for leg in robot.legs], int(cfg.steps_per_action)
+    gaits = OmegaConf.to_container(cfg.experts.gaits, resolve=True) if cfg.experts.get("gaits") else {}
+    boxes = OmegaConf.to_container(cfg.experts.gait_boxes, resolve=True) if cfg.experts.get("gait_boxes") else {}
+    top = gait_top_speeds(robot, gaits, boxes) if boxes else {}
+    table = []
+    for spec in specs:
+        if not spec.name.startswith("evaluation_"):
+            continue
+        params = spec.key.get("params", {})
+        task = make_task_from_spec(params["task_name"], params.get("task") or {})
+        arrays = evaluation_arrays(job, task.name, spec)
+        for episode, (paths, contacts) in enumerate(zip(arrays["com_paths"], arrays["foot_contacts"])):
+            count = len(contacts) // steps
+            labels = classify_actions(contacts, steps, gaits, legs) if gaits else [""] * count
+            if task.target_is_velocity:
+                targets = task.target(torch.full((task.num_steps,), episode), torch.arange(task.num_steps)).numpy()
+                targets = np.linalg.norm(targets, axis=-1), action_speeds(paths[None], targets, steps,
+                                                                          task.step_duration)[0]
+            else:
+                targets = np.full(count, np.nan), np.full(count, np.nan)
+            table += [{"setting": params["setting"], "task": task.name, "episode": episode, "action": a,
+                       "target_speed": round(float(target), 4), "speed": round(float(speed), 4), "gait": gait,
+                       **({"needed": needed_at(top, float(target)) if task.target_is_velocity else ""} if top else {})}
+                      for a, (target, speed, gait) in enumerate(zip(*targets, labels))]
+    return table
+
+
+def gait_sequences(actions: list[dict], tasks) -> dict[str, list[list[str]]]:
+    """Per task of ``tasks``, the gait of each action of each episode of a job's per-action table
+    (:func:`action_table`) in the normal setting, in order."""
+    episodes: dict[str, dict[int, list[str]]] = {task: {} for task in tasks}
+    for row in actions:
+        if row["setting"] == "normal" and row["task"] in episodes:
+            episodes[row["task"]].setdefault(int(row["episode"]), []).append(row["gait"])
+    return {task: [found[e] for e in sorted(found)] for task, found in episodes.items()}
 
 
 def gait_context(job) -> tuple[list[str], int]:
@@ -237,15 +313,16 @@ def main(cfg) -> None:
     gaits = gaits_of(cfg)
     rows = [{**row, **r.job.labels} for r in results if r.ok for row in r.rows if row["setting"] == "normal"]
     out = Path(cfg.out_dir)
-    own, several = f"own gait ({cfg.own})", f"{len(gaits)} gaits"
+    own, several = own_label(cfg.own), several_label(gaits)
     write_tables(rows, results, out, name="costs", title=f"Normalised cost, {spec.name} ({cfg.preset_name} preset, "
                  f"seeds {list(cfg.seeds)})", tasks=tasks)
     labels, first = [], None
     for result in results:
-        if not (result.ok and result.job.labels["method"] == several):
+        if not (result.ok and result.job.labels["method"] == several and result.actions is not None):
             continue
-        per_task = action_gaits(result.job, tasks, gaits)
-        first = first or (result.job, per_task)
+        per_task = gait_sequences(result.actions, tasks)
+        if first is None and here(result):
+            first = (result.job, per_task)
         labels += [{"robot": spec.name, "seed": seed_of(result.job), "task": task, "episode": e, "action": a,
                     "gait": gait}
                    for task, episodes in per_task.items() for e, sequence in enumerate(episodes)
@@ -255,7 +332,10 @@ def main(cfg) -> None:
         write_text(out / "gaits.md", gaits_markdown(labels, rows, gaits, tasks, own=own, several=several,
                                                     title=f"{spec.name}, {cfg.preset_name} preset, seeds "
                                                           f"{list(cfg.seeds)}"))
-        plot_diagrams(first, tasks, out, cfg.diagrams)
+        if first is not None:
+            plot_diagrams(first, tasks, out, cfg.diagrams)
+        else:
+            print("gait diagrams: no several-gait run directory here (every such job was taken from its record)")
         print((out / "gaits.md").read_text())
     if profiled:
         write_profile(cfg, spec, profile_results, out, own=own, several=several)
@@ -266,6 +346,11 @@ def main(cfg) -> None:
 
 def seed_of(job) -> int:
     return int(next(o.split("=", 1)[1] for o in job.overrides if o.startswith("seed=")))
+
+
+def here(result) -> bool:
+    """Whether a job's result came from its run directory (its evaluations are here), not from its record."""
+    return result.source == result.job.run_dir
 
 
 def action_speeds(com_paths: np.ndarray, targets: np.ndarray, steps: int, step_duration: float) -> np.ndarray:
@@ -280,47 +365,82 @@ def action_speeds(com_paths: np.ndarray, targets: np.ndarray, steps: int, step_d
     return (velocity * direction[None]).sum(-1)
 
 
-def profile_rows(cfg, results, *, several: str, gaits: dict) -> list[dict]:
-    """One row per latent action of every profile episode: seed, library, the action's target speed (m/s), the
-    CoM's speed along it (m/s) and, in the several-gait runs, its gait."""
-    from hierloco.components.gaits import classify_actions
-    from hierloco.pipeline.config import make_task_from_spec
+def profile_rows(tables) -> list[dict]:
+    """The profile table (``profile.csv``): one row per latent action of every profile episode, from the profile
+    jobs' per-action tables (:func:`action_table`; ``tables``: ``(seed, library, table)`` per job, in order): seed,
+    library (``method``), task, episode, action, the action's target speed (m/s), the CoM's speed along it (m/s), its
+    gait (empty for the own gait) and, where a table has it, ``needed`` (the gaits that reach the target; empty in
+    the rows of a table without it)."""
+    tables = list(tables)
+    with_needed = any("needed" in row for _, _, table in tables for row in table)
+    return [{"seed": int(seed), "method": method, "task": row["task"], "episode": row["episode"],
+             "action": row["action"], "target_speed": row["target_speed"], "speed": row["speed"], "gait": row["gait"],
+             **({"needed": row.get("needed", "")} if with_needed else {})}
+            for seed, method, table in tables for row in table if row["setting"] == "normal"]
 
-    import torch
 
-    found = []
-    top = top_speeds(cfg) if boxes_of(cfg) else {}
-    for result in results:
-        if not result.ok or (result.source != result.job.run_dir and result.job.labels["method"] != several):
-            continue  # an own-gait job taken from its record keeps no evaluation: its costs only (profile_costs)
-        legs, steps = gait_context(result.job)
-        for name, options in profile_of(cfg).items():
-            task = make_task_from_spec(name, options)
-            arrays = evaluation_arrays(result.job, name)
-            for episode, (paths, contacts) in enumerate(zip(arrays["com_paths"], arrays["foot_contacts"])):
-                targets = task.target(torch.full((task.num_steps,), episode), torch.arange(task.num_steps)).numpy()
-                speeds = action_speeds(paths[None], targets, steps, task.step_duration)[0]
-                labels = (classify_actions(contacts, steps, gaits, legs) if result.job.labels["method"] == several
-                          else [""] * task.num_steps)
-                found += [{"seed": seed_of(result.job), "method": result.job.labels["method"], "task": name,
-                           "episode": episode, "action": a, "target_speed": round(float(np.linalg.norm(target)), 4),
-                           "speed": round(float(speed), 4), "gait": gait,
-                           **({"needed": needed_at(top, float(np.linalg.norm(target)))} if top else {})}
-                          for a, (target, speed, gait) in enumerate(zip(targets, speeds, labels))]
-    return found
+def experts_gaits(record: dict) -> dict:
+    """The gaits (name -> groups) a job record's expert library was built over (its ``experts`` stage key), empty
+    for the robot's own gait alone."""
+    key = (record["stages"].get("experts.npz") or {}).get("key") or {}
+    return dict((key.get("params") or {}).get("gaits") or {})
+
+
+def profile_from_records(root, *, robot: str, tag: str | None = None,
+                         preset: str = "paper") -> tuple[list[dict], list[str]]:
+    """The profile table of a gait study (:func:`profile_rows`) made from its profile jobs' records under ``root``
+    (a records directory: the records named ``<robot>_seed<seed>[_<tag>]_profile`` and
+    ``<robot>_seed<seed>_own_profile`` of ``preset``, :func:`run_names`; each verified as it is read), with the
+    labels the study gives (:func:`several_label`; :func:`own_label`, the own gait named as the several-gait
+    library names the robot's own gait groups); and the records among them without a per-action table (made
+    before the study kept it), which add no rows."""
+    import re
+
+    from hierloco.envs.robots import get_robot
+    from hierloco.pipeline import records
+
+    chosen = []
+    for path in sorted(Path(root).rglob(records.RECORD)):
+        match = re.fullmatch(rf"{re.escape(robot)}_seed(\d+)_\w+", path.parent.name)
+        if match is None:
+            continue
+        names = run_names(robot, int(match[1]), tag)
+        kind = {names["own_profile"]: 0, names["several_profile"]: 1}.get(path.parent.name)
+        if kind is None:
+            continue
+        record = records.read(path.parent)
+        if record["rows"] is not None and f"preset={preset}" in record["signature"].get("overrides", []):
+            chosen.append((int(match[1]), kind, path.parent, record))
+    chosen.sort(key=lambda item: item[:2])  # per seed, the own gait's then the several gaits', as the study runs them
+    own_groups = {frozenset(group) for group in get_robot(robot).gait_groups}
+    gaits = next((found for *_, record in chosen if (found := experts_gaits(record))), {})
+    own = next((name for name, groups in gaits.items() if {frozenset(g) for g in groups} == own_groups), None)
+    tables, lacking = [], []
+    for seed, kind, directory, record in chosen:
+        if record.get("actions") is None:
+            lacking.append(directory.as_posix())
+            continue
+        tables.append((seed, several_label(experts_gaits(record)) if kind else own_label(own), record["actions"]))
+    return profile_rows(tables), lacking
 
 
 NEEDED_GAIT_EFFECT = 0.2  # the least rise in the share of the gaits a target needs that counts (docs/gaits.md)
 
 
 def top_speeds(cfg) -> dict[str, float]:
-    """Each gait's fastest planar command (m/s): the corner of its command box (its own in ``gait_boxes``, else the
-    robot's) farthest from standing in ``(vx, vy)``; a target faster than that needs another gait."""
-    from hierloco.components.expert_library import command_box
+    """Each gait's fastest planar command (m/s) in the study's config (:func:`gait_top_speeds`)."""
     from hierloco.envs.robots import get_robot
 
-    robot, boxes, out = get_robot(cfg.robot), boxes_of(cfg), {}
-    for name in gaits_of(cfg):
+    return gait_top_speeds(get_robot(cfg.robot), gaits_of(cfg), boxes_of(cfg))
+
+
+def gait_top_speeds(robot, gaits: dict, boxes: dict) -> dict[str, float]:
+    """Each gait's fastest planar command (m/s): the corner of its command box (its own in ``boxes``, else
+    ``robot``'s) farthest from standing in ``(vx, vy)``; a target faster than that needs another gait."""
+    from hierloco.components.expert_library import command_box
+
+    out = {}
+    for name in gaits:
         low, high = command_box(robot, boxes.get(name, {}).get("command_low"), boxes.get(name, {}).get("command_high"))
         out[name] = float(max(np.hypot(x, y) for x in (low[0], high[0]) for y in (low[1], high[1])))
     return out
@@ -462,13 +582,15 @@ def profile_markdown(found: list[dict], costs: list[dict], gaits: dict, *, own: 
 
 
 def write_profile(cfg, spec, results, out: Path, *, own: str, several: str) -> None:
-    """``profile.csv`` (one row per action), ``profile.md`` and ``gait_<task>_profile.png`` (the first seed's
-    several-gait episode, from two actions before the fastest target) in ``out``."""
+    """``profile.csv`` (one row per action, :func:`profile_rows` of the profile jobs' per-action tables),
+    ``profile.md`` and ``gait_<task>_profile.png`` (the first several-gait episode whose run directory is here, from
+    two actions before the fastest target) in ``out``."""
     from hierloco.plots import plot_gait_diagram
     from hierloco.results import csv_text
 
     gaits = gaits_of(cfg)
-    found = profile_rows(cfg, results, several=several, gaits=gaits)
+    found = profile_rows((seed_of(r.job), r.job.labels["method"], r.actions) for r in results
+                         if r.ok and r.actions is not None)
     costs = [{**row, **r.job.labels} for r in results if r.ok for row in r.rows if row["setting"] == "normal"]
     title = f"{spec.name}, {cfg.preset_name} preset, seeds {list(cfg.seeds)}"
     if not found:
@@ -481,8 +603,8 @@ def write_profile(cfg, spec, results, out: Path, *, own: str, several: str) -> N
                                                     top=top_speeds(cfg) if boxes_of(cfg) else None)
                + missing_markdown(results))
     print((out / "profile.md").read_text())
-    first = next((r for r in results if r.ok and r.job.labels["method"] == several), None)
-    if first is None:
+    first = next((r for r in results if r.ok and r.job.labels["method"] == several and here(r)), None)
+    if first is None:  # the contacts a diagram draws are in the run directories, not in the records
         return
     legs, steps = gait_context(first.job)
     for task in profile_of(cfg):

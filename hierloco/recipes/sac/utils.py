@@ -54,14 +54,23 @@ def plan(cfg, robot) -> Plan:
 
 
 def high_level_stages(cfg, low_level: dict) -> list[TaskPlan]:
-    """Per main task a SAC agent (``sac_<task>``), then its evaluation on every task of the same kind (the main
-    task and its generalisation variants)."""
+    """Per main task a SAC agent (``sac_<task>``), then its evaluation on its own task and on the generalisation
+    variants of the same kind; when two main tasks are of one kind (the fair targets' ``trajectory_tracking`` and
+    ``trajectory_tracking_fast``, docs/tasks.md), each agent is evaluated on its own task and the variants go to the
+    first of them, so every evaluation is made once, by one agent."""
     planned = []
     specs = task_specs(cfg)
-    for name in cfg.eval.tasks:
+    main = list(cfg.eval.tasks)
+    first_of_kind: dict = {}
+    for name in main:
+        first_of_kind.setdefault(task_kind(name, specs[name]), name)
+    for name in main:
         agent = sac_stage(cfg, name, specs[name], low_level)
-        evaluations = [sac_evaluation_stage(cfg, other, spec, agent) for other, spec in specs.items()
-                       if task_kind(other, spec) == task_kind(name, specs[name])]
+        kind = task_kind(name, specs[name])
+        evaluated = [name] + [other for other, spec in specs.items() if other not in main
+                              and task_kind(other, spec) == kind and first_of_kind[kind] == name]
+        evaluations = [sac_evaluation_stage(cfg, other, specs[other], agent)
+                       for other in specs if other in evaluated]  # in the config's order, as before
         planned.append(TaskPlan(name, agent, evaluations))
     return planned
 

@@ -18,7 +18,9 @@ robot fell and, with pushes, the pushes taken, not survived and recovered from, 
 flat-ground evaluations of the comparison for reference), ``pushes.md`` (fall rate and time to recover against push
 size; the largest push survived), ``success_<robot>.png`` (goals reached, falls and cost against difficulty, one
 panel per terrain, as legged_gym's success against terrain level), ``pushes_<robot>.png``, ``terrains.png`` (every
-terrain at every level, rendered) and ``wallclock.md``.
+terrain at every level, rendered) and ``wallclock.md``; with LAT variants among the methods (LAT made for terrain:
+``variants`` whose recipe is ``lat``, each trained beforehand into ``trained_runs``), ``variants.md``: each against
+plain LAT by the stated tests paired by seed.
 """
 
 import hierloco  # noqa: F401  (first: the rendering backend is chosen before anything loads MuJoCo)
@@ -67,6 +69,15 @@ def main_task_specs(recipe: str, preset: str) -> dict:
     """The main evaluation tasks of ``recipe`` at ``preset`` (name -> spec), as its runs evaluated them."""
     tasks = compose_recipe(recipe, [f"preset={preset}"]).eval.tasks
     return {name: dict(spec or {}) for name, spec in OmegaConf.to_container(tasks, resolve=True).items()}
+
+
+def generalization_overrides(recipe: str, preset: str, tasks: dict) -> list[str]:
+    """The overrides that make ``tasks`` a job's extra evaluation tasks in place of the preset's generalisation
+    tasks (which the small preset leaves null: set, not deleted and added)."""
+    value = override_value(tasks)
+    if compose_recipe(recipe, [f"preset={preset}"]).eval.get("generalization") is None:
+        return [f"eval.generalization={value}"]
+    return ["~eval.generalization", f"+eval.generalization={value}"]
 
 
 def studied_tasks(cfg) -> list[str]:
@@ -186,7 +197,7 @@ def jobs(cfg, robots) -> list:
                 overrides = [f"preset={cfg.preset_name}", f"robot={spec.reference}", f"seed={seed}",
                              "settings=[normal]", "progress=false", *variant, *cfg.overrides,
                              *(cfg.method_overrides or {}).get(method, []), "eval.videos=[]", "eval.figures=false",
-                             "~eval.generalization", f"+eval.generalization={override_value(extra)}"]
+                             *generalization_overrides(recipe, cfg.preset_name, extra)]
                 trained = str(cfg.trained_runs).format(method=method, robot=spec.name, seed=seed)
                 planned.append(studies.Job(recipe, str(Path(cfg.runs_dir) / method / f"{spec.name}_seed{seed}"),
                                            overrides, labels={"method": method}, reuse_from=trained))
@@ -286,6 +297,33 @@ def terrain_markdown(rows: list[dict], cfg, *, title: str) -> str:
                 lines.append(f"| {robot} | {method} | {_mean_std([r['normalized_cost'] for r in of])} | "
                              f"{_count(goals(of), 'success')} |")
     return "\n".join(lines) + "\n"
+
+
+def lat_variants(cfg) -> list[str]:
+    """The studied methods that are LAT made otherwise (a variant of the ``lat`` recipe: experts with more foot
+    clearance on rough ground, a CoM model that reads the body state, dynamics data under randomised dynamics;
+    ``variants`` of the config), when plain ``lat`` is studied too."""
+    if "lat" not in cfg.methods:
+        return []
+    return [m for m in cfg.methods if m != "lat" and studies.resolve_method(m, cfg.variants)[0] == "lat"]
+
+
+def variants_markdown(rows: list[dict], cfg, *, title: str) -> str:
+    """Each LAT variant against plain LAT on every terrain and level (and the flat main tasks), by the stated tests
+    over seeds paired by seed (:func:`hierloco.claims.variant_verdicts`, ``docs/statistics.md``)."""
+    from hierloco.claims import variant_verdicts
+
+    variants = lat_variants(cfg)
+    tasks = sorted({r["task"] for r in rows if r["push_mps"] == 0 and r["method"] in ["lat", *variants]})
+    described = "; ".join(f"`{m}`: " + " ".join(studies.resolve_method(m, cfg.variants)[1]) for m in variants)
+    return "\n".join([
+        f"# LAT made for terrain, against plain LAT ({title})", "",
+        f"Variants ({described}), each trained as plain LAT is but for its overrides, then evaluated as the others on "
+        "every terrain and level. Per place (robot, setting, task on a terrain at a difficulty), the variant's mean "
+        "normalised cost per seed against plain LAT's of the same seed: \"better\" holds when the paired difference "
+        "is significantly above 0 and at least the minimum effect; \"close\" when it is within the equivalence "
+        "margin (docs/statistics.md). No correction over the places: read the tally as a screen.", "",
+        variant_verdicts(rows, "lat", variants, tasks, reference_name="plain LAT")])
 
 
 def _method_order(method: str):
@@ -440,6 +478,8 @@ def main(cfg) -> None:
         write_text(out / "terrain.csv", csv_text(rows, [*EPISODE_COLUMNS, *LABELS, *WORLD_COLUMNS]))
         table = terrain_markdown(rows, cfg, title=title)
         write_text(out / "terrain.md", table + missing_markdown(results))
+        if lat_variants(cfg):
+            write_text(out / "variants.md", variants_markdown(rows, cfg, title=title))
         summary = push_summary(rows, float(cfg.survival_fall_rate))
         if summary:
             write_text(out / "pushes.md", push_markdown(summary, title=title,

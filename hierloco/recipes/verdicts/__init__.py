@@ -171,11 +171,13 @@ def _entry_text(entry: Entry, fixed: str) -> str:
 def _section(number: str, claim, entries: list[Entry], evidence: Evidence, checks: dict, sources: dict,
              folders: dict) -> tuple[list[str], list[str]]:
     """One claim's section: its entries (one per robot) with their verdicts, then every row (the evidence); and the
-    entries' verdicts after Holm's correction over the claim's entries."""
+    entries' verdicts after Holm's correction over the claim's entries. A claim its source has no check of is "not
+    measured yet", with what it needs (:attr:`hierloco.claims.Claim.needs`, else the study it needs)."""
     lines = [f"## {number}. {claim.words}\n\n{claim.where}. The paper's numbers: {claim.paper}.\n"]
     rows = [row for entry in entries for row in entry.rows]
     if not rows:
-        lines.append(f"**not measured yet** (no runs of the study it needs: `{claim.source}`).\n")
+        needs = claim.needs or f"no runs of the study it needs: `{claim.source}`"
+        lines.append(f"**not measured yet** ({needs}).\n")
         return lines, []
     decided_ = [e for e in entries if e.check is not None]
     holm = dict(zip(map(id, decided_), corrected([e.check for e in decided_])))
