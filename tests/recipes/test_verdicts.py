@@ -335,3 +335,18 @@ def test_claims_nothing_here_can_test_are_listed_with_the_reason(tmp_path):
                   "learned jointly", "the hardware gap's causes", "slipping \"and other unobserved factors"):
         row = next(line for line in listed.splitlines() if words in line)
         assert "| not testable here |" in row, row
+
+
+def test_the_seeds_a_fragile_claim_needs_take_only_the_options_its_power_depends_on():
+    """An inconclusive part decided with ``not_testable`` (the gait claim's) once stopped the fragile page with a
+    traceback: its power takes the thresholds, not the testability level."""
+    import math
+
+    from hierloco import stats
+    from hierloco.recipes.verdicts import power_options
+
+    options = {"min_effect_rel": 0.0, "min_effect_abs": 0.2, "not_testable": math.inf}
+    assert power_options(options) == {"min_effect_rel": 0.0, "min_effect_abs": 0.2}
+    needed = stats.seeds_needed([0.53, 0.67, 0.53], [0.90, 0.60, 0.80], kind="better", paired=True,
+                                **power_options(options))
+    assert needed is None or needed > 3

@@ -408,6 +408,15 @@ class Need:
     source: Source | None = None
 
 
+def power_options(options) -> dict:
+    """The options of a part's decision that its power depends on (thresholds and alpha; not, say, the
+    ``not_testable`` level, which decides whether it is testable at all)."""
+    import inspect
+
+    accepted = set(inspect.signature(stats.power).parameters) - {"a", "b", "n", "kind", "paired"}
+    return {key: value for key, value in dict(options).items() if key in accepted}
+
+
 def seeds_for(check: Check, study: str, reason: str, section: str = "paper", source: Source | None = None) -> Need:
     """How many seeds per method would decide ``check`` (:func:`hierloco.stats.seeds_needed`, the measured means
     and spreads taken as the truth): each comparison not yet decided (all of them when the verdict differs between
@@ -423,7 +432,7 @@ def seeds_for(check: Check, study: str, reason: str, section: str = "paper", sou
     if any(np.ndim(v) and len(v) < 2 for part in undecided for v in (part.a, part.b)):
         return Need(check, study, None, sides, reason, section, spread_unknown=True, source=source)
     for part in undecided:
-        n = stats.seeds_needed(part.a, part.b, kind=part.kind, paired=part.paired, **dict(part.options))
+        n = stats.seeds_needed(part.a, part.b, kind=part.kind, paired=part.paired, **power_options(part.options))
         counts.append(n)
         d, threshold = part.decision.estimate, part.decision.threshold
         if (part.kind == "better" and d < threshold) or (part.kind == "close" and abs(d) > threshold):
