@@ -341,10 +341,14 @@ class BatchedSimulator:
         the lowest ground near it (m; above the floor on flat ground), as falls are judged (``docs/terrain.md``)."""
         qpos = self.qpos
         roll_pitch = quat_to_roll_pitch_yaw(qpos[:, 3:7])[:, :2]
-        height = qpos[:, 2]
-        if not self.terrain.is_flat:
-            height = height - self.terrain.ground_below(qpos[:, 0], qpos[:, 1], self._ground_reach)
-        return np.concatenate([roll_pitch, height[:, None]], axis=1)
+        return np.concatenate([roll_pitch, self._height_above_ground(qpos)[:, None]], axis=1)
+
+    def _height_above_ground(self, qpos: np.ndarray) -> np.ndarray:
+        """``...`` the base's height above the lowest ground within half the footprint radius of it (m; its world z
+        on flat ground), from ``... x nq`` generalised positions: what falls are judged by."""
+        if self.terrain.is_flat:
+            return qpos[..., 2]
+        return qpos[..., 2] - self.terrain.ground_below(qpos[..., 0], qpos[..., 1], self._ground_reach)
 
     @property
     def qvel(self) -> np.ndarray:
@@ -426,9 +430,7 @@ class BatchedSimulator:
         quat = qpos[..., 3:7]
         rpy = quat_to_roll_pitch_yaw(quat)
         robot = self.robot
-        height = qpos[..., 2]
-        if not self.terrain.is_flat:  # above the lowest ground near the base
-            height = height - self.terrain.ground_below(qpos[..., 0], qpos[..., 1], self._ground_reach)
+        height = self._height_above_ground(qpos)
         if self._copy_fall is None:
             down = robot_has_fallen(robot, rpy[..., 0], rpy[..., 1], height)
         else:
