@@ -31,6 +31,7 @@ from hierloco.io import ArtifactError, check_schema, inside
 from hierloco.registry import is_import_path
 
 MANIFEST = "run.json"
+BODY_CONTEXT = {"body_state": 3}  # roll, pitch (rad), height above the ground (m): LatentActionEnv's body_state
 
 
 def make_world_model(model, low_level, *, task=None, device: str = "cpu"):
@@ -41,6 +42,9 @@ def make_world_model(model, low_level, *, task=None, device: str = "cpu"):
     from hierloco.envs.world_model import CoMWorldModelEnv
 
     context = dict(getattr(model, "metadata", {}).get("context") or {})
+    if any(BODY_CONTEXT.get(key) != size for key, size in context.items()):  # a checkpoint is data: read, not trusted
+        raise ArtifactError(f"its CoM model reads {context} beside the action: not a state the latent-action env "
+                            f"reports ({BODY_CONTEXT})")
     net = getattr(model, "model", model).to(device).eval()
     if low_level.num_choices is not None:
         return CoMWorldModelEnv(net, num_choices=low_level.num_choices, action_features=low_level.action_features,

@@ -202,7 +202,6 @@ def latent_low_level(policy: Stage) -> dict:
 
 # ---------------------------------------------------------------------------------------------------- dynamics
 DATA_KEYS = ("num_transitions", "num_robots", "episode_length")
-BODY_CONTEXT = {"body_state": 3}  # roll, pitch (rad), height above the ground (m): LatentActionEnv's body_state
 MODEL_KEYS = ("hidden", "lr", "batch_size", "holdout", "patience", "max_epochs")
 
 
@@ -261,7 +260,7 @@ def model_params(cfg) -> dict:
 
 def dynamics_model_stage(cfg, data: Stage, setting: str) -> Stage:
     """The CoM model of ``setting``; with ``dynamics.body_state=true`` it also reads what the trunk feels of the
-    ground at the action's start (roll, pitch, height: :data:`BODY_CONTEXT`), keyed only then."""
+    ground at the action's start (roll, pitch, height: :data:`hierloco.trained.BODY_CONTEXT`), keyed only then."""
     params = {"seed": cfg.seed, "device": training_device(cfg), "duration": cfg.steps_per_action * CONTROL_TIMESTEP,
               **model_params(cfg), **({"body_state": True} if section(cfg, "dynamics").get("body_state") else {})}
     return Stage(f"dynamics_model_{setting}", params, {"data": data.digest}, f"dynamics_model_{setting}.pt",
@@ -271,6 +270,8 @@ def dynamics_model_stage(cfg, data: Stage, setting: str) -> Stage:
 def build_dynamics_model(run, params, data: TransitionData, low_level) -> TrainedCoMModel:
     """The local-frame delta model ``(dx, dy, dyaw, vx', vy') = f(vx, vy, a)``, early-stopped on held-out data."""
     from hierloco.components.com_model import train_com_model
+
+    from hierloco.trained import BODY_CONTEXT
 
     params = dict(params)
     context = BODY_CONTEXT if params.pop("body_state", False) else {}

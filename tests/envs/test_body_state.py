@@ -89,3 +89,19 @@ def test_a_world_model_holds_the_body_state_over_the_horizon_and_needs_it():
         env.step(env.initial_state(torch.zeros(2, 5)).set("action", torch.zeros(2, 2)))
     with pytest.raises(ValueError, match="context"):
         CoMWorldModelEnv(Tilted(), action_low=[-1, -1], action_high=[1, 1], context={"com_state": 5})
+
+
+def test_a_checkpoint_that_names_another_context_is_refused_in_one_line():
+    """A run directory is data: a model whose metadata asks the world model for a state the env does not report is
+    an ArtifactError, not a world model that fails later."""
+    from hierloco.components.com_model import CoMDynamicsModel, TrainedCoMModel
+    from hierloco.components.low_level import CommandLowLevel
+    from hierloco.io import ArtifactError
+    from hierloco.trained import make_world_model
+
+    low = CommandLowLevel("a1", 1)
+    trained = TrainedCoMModel(CoMDynamicsModel(action_dim=6, hidden=8), {"context": {"body_state": 3}})
+    assert make_world_model(trained, low).measured_keys[-1] == "body_state"
+    for context in ({"body_state": 4}, {"secret": 3}):
+        with pytest.raises(ArtifactError, match="not a state the latent-action env reports"):
+            make_world_model(TrainedCoMModel(CoMDynamicsModel(action_dim=6, hidden=8), {"context": context}), low)
