@@ -130,17 +130,24 @@ def make_task_from_spec(name: str, spec: dict):
 # nothing: every stage key is then what it was before the world had options.
 WORLD_KEYS = ("terrain", "pushes", "randomization")
 WORLD_PARTS = ("data", "training", "evaluation")  # dynamics data, SAC training (high and low level), evaluations
+# The "hardware" robot's own world (``hardware_world.terrain``, ``hardware_world.randomization``): the ground it walks
+# on and how its dynamics vary, for the settings that simulate it (``hardware``, ``hardware_unadapted``: its dynamics
+# data and its evaluations) and for no other, so that the nominal robot stays in the simulation's world while the
+# "hardware" one meets what a lab floor adds (Li et al., Sec. IV-D; docs/terrain.md, "The hardware gap").
+HARDWARE_WORLD_KEYS = ("terrain", "randomization")
 
 
 def _plain(value):
     return OmegaConf.to_container(value, resolve=True) if isinstance(value, (DictConfig, ListConfig)) else value
 
 
-def world_spec(cfg, part: str, task: dict | None = None) -> dict:
+def world_spec(cfg, part: str, task: dict | None = None, setting: str | None = None) -> dict:
     """What the config gives for the world of ``part`` (one of :data:`WORLD_PARTS`; for ``evaluation``, of the task
-    whose spec is ``task``): ``{"terrain": ..., "pushes": ..., "randomization": ...}`` as typed (``None``: the
-    default). Pushes are an evaluation's only. A config without these sections (a run made before them) is flat,
-    without pushes, with nominal dynamics."""
+    whose spec is ``task``; in ``setting``, where it is given): ``{"terrain": ..., "pushes": ..., "randomization":
+    ...}`` as typed (``None``: the default). Pushes are an evaluation's only. In a setting that simulates the
+    "hardware" robot, ``hardware_world.*`` (:data:`HARDWARE_WORLD_KEYS`) comes last: the ground under that robot is
+    its own. A config without these sections (a run made before them) is flat, without pushes, with nominal
+    dynamics."""
     if part not in WORLD_PARTS:
         raise ValueError(f"part must be one of {WORLD_PARTS}, got {part!r}")
     spec = {"terrain": _plain(get(cfg, "terrain")), "pushes": None,
@@ -150,6 +157,10 @@ def world_spec(cfg, part: str, task: dict | None = None) -> dict:
             for source in (get(cfg, f"eval.{key}"), (task or {}).get(key)):
                 if source is not None:
                     spec[key] = _plain(source)
+    if setting is not None and physical_setting(setting) == "hardware":
+        for key in HARDWARE_WORLD_KEYS:
+            if get(cfg, f"hardware_world.{key}") is not None:
+                spec[key] = _plain(get(cfg, f"hardware_world.{key}"))
     return spec
 
 
@@ -193,14 +204,15 @@ def make_world(spec: dict) -> World:
                  make_randomization(spec.get("randomization")))
 
 
-def world(cfg, part: str, task_name: str | None = None) -> World:
-    """The :class:`World` of ``part`` in ``cfg`` (for ``evaluation``, of the evaluation task ``task_name``); a bad
-    one is a :class:`ConfigError` (checked before any work by :func:`check_world`)."""
+def world(cfg, part: str, task_name: str | None = None, setting: str | None = None) -> World:
+    """The :class:`World` of ``part`` in ``cfg`` (for ``evaluation``, of the evaluation task ``task_name``; in
+    ``setting``: :func:`world_spec`); a bad one is a :class:`ConfigError` (checked before any work by
+    :func:`check_world`)."""
     from hierloco.envs.terrain import TerrainError
 
     task = task_specs(cfg).get(task_name) if task_name is not None else None
     try:
-        return make_world(world_spec(cfg, part, task))
+        return make_world(world_spec(cfg, part, task, setting))
     except TerrainError as error:
         raise ConfigError(f"bad config: {error}") from None
 
@@ -213,6 +225,7 @@ def check_world(c: Checker) -> None:
     makers = {"terrain": make_terrain, "pushes": make_pushes, "randomization": make_randomization}
     given = [("", key, get(c.cfg, key)) for key in ("terrain", "randomization")]
     given += [("eval.", key, get(c.cfg, f"eval.{key}")) for key in WORLD_KEYS]
+    given += [("hardware_world.", key, get(c.cfg, f"hardware_world.{key}")) for key in HARDWARE_WORLD_KEYS]
     try:
         specs = task_specs(c.cfg)
     except Exception:  # noqa: BLE001  (a malformed eval section: check_eval says why)
@@ -294,6 +307,17 @@ def check_common(c: Checker, robot_checks: bool = True) -> Any:
             c.fail(f"hardware: {error}")
     elif hardware is not None and len(hardware):
         c.fail("hardware.* options are given but no setting simulates the hardware robot (settings=[...,hardware])")
+    hardware_world = get(cfg, "hardware_world")
+    if hardware_world is not None and not isinstance(hardware_world, DictConfig):
+        c.fail(f"hardware_world must map {' and '.join(HARDWARE_WORLD_KEYS)} to a world, got {hardware_world!r}")
+    elif hardware_world is not None:
+        unknown = sorted(set(hardware_world) - set(HARDWARE_WORLD_KEYS))
+        if unknown:
+            c.fail(f"hardware_world: unknown option(s) {', '.join(map(repr, unknown))} (options: "
+                   f"{', '.join(HARDWARE_WORLD_KEYS)})")
+        if any(hardware_world.get(k) is not None for k in HARDWARE_WORLD_KEYS) and not any(
+                s in SETTINGS and physical_setting(s) == "hardware" for s in settings):
+            c.fail("hardware_world.* is given but no setting simulates the hardware robot (settings=[...,hardware])")
     check_world(c)
     return robot
 

@@ -215,12 +215,13 @@ def hardware_params(cfg, setting: str) -> dict:
 
 
 def dynamics_data_stage(cfg, low_level: dict, setting: str, robot) -> Stage:
-    """The CoM dynamics data of ``setting``, collected in the run's world (``terrain``, ``randomization``; keyed only
-    when not flat and nominal: :class:`hierloco.pipeline.config.World`)."""
+    """The CoM dynamics data of ``setting``, collected in the setting's world (``terrain``, ``randomization``, and
+    ``hardware_world.*`` for the "hardware" robot; keyed only when not flat and nominal:
+    :class:`hierloco.pipeline.config.World`)."""
     d = section(cfg, "dynamics")
     locked, limp = fault_legs(robot, setting)
     params = {"seed": cfg.seed, "setting": setting, "disabled_legs": list(locked), "limp_legs": list(limp),
-              **{k: d[k] for k in DATA_KEYS}, **hardware_params(cfg, setting), **world(cfg, "data").params()}
+              **{k: d[k] for k in DATA_KEYS}, **hardware_params(cfg, setting), **world(cfg, "data", setting=setting).params()}
     return Stage(f"dynamics_data_{setting}", params, {"low_level": low_level},
                  f"dynamics_data_{setting}.npz", "hierloco.components.dynamics_data:TransitionData",
                  build_dynamics_data)
@@ -296,7 +297,8 @@ def evaluation_stage(cfg, name: str, spec: dict, setting: str, model: Stage, low
     """MPC on one task; cached per task and planner (the file name carries the key's digest), in the task's world
     (:func:`evaluation_params`)."""
     params = {"seed": cfg.seed, "device": cfg.device, "setting": setting, "task_name": name,
-              "planner": planner_params(cfg), **hardware_params(cfg, setting), **evaluation_params(cfg, name, spec)}
+              "planner": planner_params(cfg), **hardware_params(cfg, setting),
+              **evaluation_params(cfg, name, spec, setting)}
     after = {"model": model.digest, "low_level": low_level}
     key_digest = digest({"params": params, "after": after})
     return Stage(f"evaluation_{setting}_{name}", params, after, f"evaluation/{setting}/{name}-{key_digest}.npz",
@@ -330,18 +332,20 @@ def build_evaluation(run, params, make_low_level, model: TrainedCoMModel) -> Tas
     return world_evaluation(evaluation, rollout, task, world_, steps_per_action=run.cfg.steps_per_action)
 
 
-def evaluation_params(cfg, name: str, spec: dict) -> dict:
+def evaluation_params(cfg, name: str, spec: dict, setting: str | None = None) -> dict:
     """What an evaluation's key holds of its task (``task``: its type and options, without its world) and of the
-    world it runs in (:func:`hierloco.pipeline.config.world`: ``terrain``, ``pushes``, ``randomization``, each only
-    when it is not the default, so flat evaluations keep their keys). Shared by every method's evaluations."""
+    world it runs in, in ``setting`` (:func:`hierloco.pipeline.config.world`: ``terrain``, ``pushes``,
+    ``randomization``, each only when it is not the default, so flat evaluations keep their keys). Shared by every
+    method's evaluations."""
     return {"task": {key: value for key, value in spec.items() if key not in WORLD_KEYS},
-            **world(cfg, "evaluation", name).params()}
+            **world(cfg, "evaluation", name, setting).params()}
 
 
 def stage_world(run, params: dict, part: str) -> World:
     """The world a stage simulates in (``part``: ``data``, ``training`` or ``evaluation``), built from the run's
-    config (a terrain file read again) and checked to be the one its key holds (``params``)."""
-    built = world(run.cfg, part, params.get("task_name") if part == "evaluation" else None)
+    config (a terrain file read again; in the stage's ``setting``) and checked to be the one its key holds
+    (``params``)."""
+    built = world(run.cfg, part, params.get("task_name") if part == "evaluation" else None, params.get("setting"))
     keyed = {key: params[key] for key in WORLD_KEYS if key in params}
     if built.params() != keyed:
         raise RuntimeError(f"the {part} world of the config ({built.params()}) is not the stage's ({keyed})")

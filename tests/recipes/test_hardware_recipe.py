@@ -54,3 +54,24 @@ def test_each_gap_gets_its_own_run_directories():
     assert run_dir({}) == run_dir({"servo_latency": 0.02}) == "outputs/hardware/paper/lat/daisy_seed0"
     assert run_dir({"motor_strength": 0.6, "com_noise": [0.04, 0.06, 0.1]}) == \
         "outputs/hardware/paper/lat/daisy_seed0-motor_strength0.6-com_noise0.04_0.06_0.1"
+
+
+def test_the_perturbed_robot_s_world_gets_its_own_run_directories_and_overrides():
+    """``hardware_world`` reaches every job as ``+hardware_world.*`` overrides and names its run directories."""
+    from omegaconf import OmegaConf
+
+    from hierloco.envs.robots import get_robot
+    from hierloco.recipes.hardware.run import jobs, world_tag
+
+    cfg = OmegaConf.create({"methods": ["lat"], "variants": {}, "seeds": [0], "preset_name": "paper",
+                            "num_experts": 20, "num_transitions": 2000, "overrides": []})
+    rough = {"terrain": {"name": "rough", "difficulty": 0.5}}
+    both = {**rough, "randomization": "standard"}
+    job = jobs(cfg, [get_robot("daisy")], {}, both)[0]
+    assert "+hardware_world.terrain={name: rough, difficulty: 0.5}" in job.overrides
+    assert "+hardware_world.randomization=standard" in job.overrides
+    assert job.run_dir.startswith("outputs/hardware/paper/lat/daisy_seed0-on_rough0.5-randomized-world")
+    tags = {world_tag(world) for world in ({}, rough, both, {"terrain": {"name": "rough", "difficulty": 0.75}},
+                                           {"randomization": "standard"}, {"terrain": "flat"})}
+    assert len(tags) == 5 and "" in tags  # flat ground is the simulation's own world: no suffix
+    assert world_tag({"terrain": {"name": "rough", "difficulty": 0.5, "amplitude_m": 0.03}}) != world_tag(rough)

@@ -144,3 +144,27 @@ def test_the_hardware_settings_keys():
     changed = {name for name, stage in later.items() if stage.digest != plan[name].digest}
     assert changed == {"dynamics_data_hardware", "dynamics_model_hardware"} | {
         name for name in plan if name.startswith("evaluation_hardware")}
+
+
+def test_the_hardware_robot_s_own_world_changes_only_its_keys():
+    """``hardware_world.*`` puts the perturbed robot (its dynamics data and the evaluations of both hardware
+    settings) on a terrain with randomised dynamics; the nominal robot's stages keep their keys, and a run without
+    a hardware setting refuses the option (test_user_errors)."""
+    from tests.recipes.stage_plans import plan
+
+    settings = "settings=[normal,hardware_unadapted,hardware]"
+    before = plan("lat", settings)
+    after = plan("lat", settings, "+hardware_world.terrain={name: rough, difficulty: 0.5}",
+                 "+hardware_world.randomization=standard")
+    changed = {name for name in before if before[name].digest != after[name].digest}
+    assert changed == {"dynamics_data_hardware", "dynamics_model_hardware"} | {
+        name for name in before if name.startswith("evaluation_hardware")}
+    data = after["dynamics_data_hardware"].params
+    assert data["terrain"] == {"name": "rough", "difficulty": 0.5, "seed": 0} and data["randomization"]["friction"]
+    assert "terrain" not in after["dynamics_data_normal"].params
+    assert after["evaluation_hardware_unadapted_goal_reaching"].params["terrain"]["name"] == "rough"
+    assert "terrain" not in after["evaluation_normal_goal_reaching"].params
+    # the perturbed robot's own world comes last: it wins over the evaluations' world, for its settings only
+    over = plan("lat", settings, "eval.terrain=slope", "+hardware_world.terrain=stairs")
+    assert over["evaluation_normal_goal_reaching"].params["terrain"]["name"] == "slope"
+    assert over["evaluation_hardware_goal_reaching"].params["terrain"]["name"] == "stairs"

@@ -62,8 +62,11 @@ def run_in_process(recipe: str, *overrides: str) -> tuple[int, str]:
 @pytest.mark.parametrize("overrides, message", [
     (["+hardware.latency=0.03"], "hardware: unknown hardware option(s) ['latency']"),
     (["+hardware.mass_scale=-1"], "hardware: robot 'a1_hardware': mass_scale must be a finite positive number"),
+    (["+hardware_world.ground=rough"], "hardware_world: unknown option(s) 'ground'"),
+    (["+hardware_world.terrain={name: rough, difficulty: 2}"], "hardware_world.terrain 'rough': difficulty"),
 ])
 def test_a_bad_hardware_option_is_one_clear_line(tmp_path, monkeypatch, overrides, message):
+    """The perturbation's options and the perturbed robot's world (``hardware_world``)."""
     monkeypatch.chdir(tmp_path)
     code, stderr = run_in_process("lat", "preset=tiny", f"run_dir={tmp_path / 'run'}", "settings=[normal,hardware]",
                                   *overrides)

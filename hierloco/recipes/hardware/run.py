@@ -2,13 +2,18 @@
 
     hierloco study hardware                           # Daisy and A1, LAT and IK, 3 seeds, paper scale
     hierloco study hardware robots=[daisy] methods=[lat] '+hardware.servo_latency=0.04'
+    hierloco study hardware robots=[daisy] 'hardware_world.terrain={name: rough, difficulty: 0.5}'
 
 Each run learns its low level on the nominal robot (LAT: from 20 experts, as the paper's hardware low level), then
 is evaluated in three settings: ``normal`` (the nominal robot), ``hardware_unadapted`` (the perturbed copy of
 :func:`hierloco.envs.robots.hardware.perturbed`, planned with the nominal CoM model) and ``hardware`` (the same
-copy, with the CoM model learned again on it from 2000 samples). Runs go in
+copy, with the CoM model learned again on it from 2000 samples). ``hardware_world.terrain`` and
+``hardware_world.randomization`` put the perturbed robot (its dynamics data and its evaluations, not the nominal
+robot's) on a terrain and give it randomised dynamics: the lab floor the paper's hardware walked on, beside the
+robot's own differences (docs/terrain.md, "The hardware gap"). Runs go in
 ``outputs/hardware/<preset>/<method>/<robot>_seed<seed>``, suffixed with the options that differ from the default
-perturbation (``daisy_seed0-servo_latency0.04``), so studies of several gaps run side by side. Writes
+perturbation and with the perturbed robot's world (``daisy_seed0-servo_latency0.04``,
+``daisy_seed0-on_rough0.5-randomized-world1a2b3c4d``), so studies of several gaps run side by side. Writes
 ``hardware.csv``, ``hardware.md`` (the paper's hardware metrics: goals reached and the steps to reach them,
 tracking costs; then the full table and the perturbation used) and ``wallclock.md`` in ``out_dir``.
 """
@@ -32,9 +37,12 @@ LABELS = {"normal": "nominal robot", "hardware_unadapted": "perturbed, nominal m
 EXPERT_METHODS = ("lat", "lib")  # the recipes whose low level is learned from experts
 
 
-def check(cfg) -> tuple[list, dict]:
-    """The robots and the perturbation options; raises one ConfigError naming every problem."""
+def check(cfg) -> tuple[list, dict, dict]:
+    """The robots, the perturbation options and the perturbed robot's world (``hardware_world``: only the options
+    given); raises one ConfigError naming every problem."""
     from hierloco.envs.robots import get_robot, perturbed
+    from hierloco.envs.terrain import TerrainError
+    from hierloco.pipeline.config import HARDWARE_WORLD_KEYS, make_world
 
     as_lists(cfg, ("robots", "seeds", "methods", "overrides"))
     problems, robots = [], []
@@ -50,8 +58,17 @@ def check(cfg) -> tuple[list, dict]:
     for key in ("num_experts", "num_transitions"):
         if not (isinstance(cfg[key], int) and cfg[key] >= 10):
             problems.append(f"{key} must be an integer >= 10, got {cfg[key]!r}")
+    given = OmegaConf.to_container(cfg.hardware_world, resolve=True) if cfg.get("hardware_world") else {}
+    if not isinstance(given, dict) or set(given) - set(HARDWARE_WORLD_KEYS):
+        problems.append(f"hardware_world must map {' and/or '.join(HARDWARE_WORLD_KEYS)} to a world, got {given!r}")
+        given = {}
+    world = {key: value for key, value in given.items() if value is not None}
+    try:
+        make_world(world)
+    except TerrainError as error:
+        problems.append(f"hardware_world: {error}")
     refuse(problems)
-    return robots, options
+    return robots, options, world
 
 
 def gap_tag(options: dict) -> str:
@@ -68,10 +85,34 @@ def gap_tag(options: dict) -> str:
     return "".join(f"-{k}{text(v)}" for k, v in hardware_options(**options).items() if v != default[k])
 
 
-def jobs(cfg, robots, options: dict) -> list:
+def world_tag(world: dict) -> str:
+    """The run-directory suffix naming the perturbed robot's world (``""`` for the simulation's own): the terrain
+    and its difficulty, ``-randomized``, and a digest of every option, so that two worlds never share a folder.
+
+        >>> world_tag({})
+        ''
+        >>> world_tag({"terrain": {"name": "rough", "difficulty": 0.5}})[:17]
+        '-on_rough0.5-worl'
+    """
+    from hierloco.pipeline.config import make_world
+    from hierloco.pipeline.rundir import digest
+
+    built = make_world(world)
+    if built.is_default:
+        return ""
+    parts = [f"-on_{built.terrain.registry_name}{built.terrain.difficulty:g}"] if built.terrain.key() else []
+    parts += ["-randomized"] if built.randomization.active else []
+    return "".join(parts) + f"-world{digest(built.params())[:8]}"
+
+
+def jobs(cfg, robots, options: dict, world: dict | None = None) -> list:
+    from hierloco.pipeline.config import override_value
+
     planned = []
-    tag = gap_tag(options)
+    world = dict(world or {})
+    tag = gap_tag(options) + world_tag(world)
     perturbation = [f"+hardware.{k}={list(v) if isinstance(v, (list, tuple)) else v}" for k, v in options.items()]
+    perturbation += [f"+hardware_world.{k}={override_value(v)}" for k, v in world.items()]
     for spec in robots:
         for method in cfg.methods:
             recipe, variant = studies.resolve_method(method, cfg.variants)
@@ -116,8 +157,10 @@ def main(cfg) -> None:
     from hierloco.envs.robots import hardware_options
     from hierloco.pipeline.report import wallclock_markdown
 
-    robots, options = check(cfg)
-    results = run_study(cfg, jobs(cfg, robots, options))
+    from hierloco.pipeline.config import make_world
+
+    robots, options, world = check(cfg)
+    results = run_study(cfg, jobs(cfg, robots, options, world))
     rows = studies.rows_of(results)
     out = Path(cfg.out_dir)
     if rows:
@@ -127,7 +170,8 @@ def main(cfg) -> None:
         write_text(out / "hardware.md", f"# Transfer to a perturbed robot ({cfg.preset_name} preset, seeds "
                                         f"{list(cfg.seeds)})\n\nLow level from {cfg.num_experts} experts (LAT) on "
                                         f"the nominal robot; CoM models from {cfg.num_transitions} samples. "
-                                        f"Perturbation: {used}. Normalised costs, mean +- std over targets and "
+                                        f"Perturbation: {used}. The perturbed robot's world: "
+                                        f"{make_world(world).describe()}. Normalised costs, mean +- std over targets and "
                                         f"seeds; steps to goal over the goals reached.\n\n{summary}\n"
                                         f"## Every task\n\n{markdown_table(rows)}" + missing_markdown(results))
         write_text(out / "wallclock.md", wallclock_markdown(results))
