@@ -723,20 +723,21 @@ def comparisons(check: Check, configuration: Callable[[str], str] | None = None)
 
 def ledger(claimed: list[tuple], configuration: Mapping[str, Callable] | None = None) -> list[Entry]:
     """The entries of one page, in its order: ``claimed`` is ``(section, claim, checks)`` per claim (a claim with no
-    source, or no checks, gets one entry per robot of :attr:`Claim.robots` with its status); ``configuration``:
+    source, or no checks, gets one entry per robot of :attr:`Claim.robots` with its status, and a robot of
+    :attr:`Claim.robots` its checks do not cover one "not measured yet"); ``configuration``:
     per source, the configuration each side's name stands for (:meth:`Source.configuration`). A check whose every
     comparison an earlier section's counted check already makes (:func:`comparisons`) is shown as "same test as
     section N" and not counted again; a check the claim does not count (:attr:`Claim.counted`) is shown as its
     extra; each robot's counted checks are its entry (:func:`entry_check`).
 
-        >>> best = Claim(order=1, words="LAT is best", where="-", source="s", key="best")
+        >>> best = Claim(order=1, words="LAT is best", where="-", source="s", key="best", robots=("a1",))
         >>> again = Claim(order=2, words="LIB is worse than LAT", where="-", source="s", key="worse")
         >>> lat, lib = [0.1, 0.11, 0.12], [0.5, 0.52, 0.51]
         >>> check = lambda key: decided(key, key, "a1", "normal", "velocity_tracking", "-", "-",
         ...                             [part("lat vs lib", lat, lib, "better", names=("lat:normal", "lib:normal"))])
         >>> [(e.section, e.verdict, e.counted) for e in ledger([("1", best, [check("best")]),
         ...                                                     ("2", again, [check("worse")])])]
-        [('1', 'holds', True), ('2', 'same test as section 1', False)]
+        [('1', 'holds', True), ('2', 'same test as section 1', False), ('2', 'not measured yet', True)]
     """
     configuration = dict(configuration or {})
     seen: dict[tuple, str] = {}
@@ -767,6 +768,9 @@ def ledger(claimed: list[tuple], configuration: Mapping[str, Callable] | None = 
             repeats = sorted({r.status for r in mine if r.status.startswith("same test")})
             entries.append(Entry(section, claim, robot, mine, entry_check(claim.words, robot, counted) if counted
                                  else None, "" if counted else "; ".join(repeats) or EXTRA))
+        measured = {c.robot for c in checks}
+        entries += [Entry(section, claim, robot, status=NOT_MEASURED_YET) for robot in claim.robots
+                    if robot not in measured]  # a robot its source has no runs of yet
     return entries
 
 

@@ -137,9 +137,10 @@ def test_an_entry_holds_only_when_every_part_holds():
 def test_a_test_an_earlier_section_makes_counts_once():
     from hierloco.claims import Claim, Source, entry_counts, ledger
 
-    best = Claim(order=1, words="LAT is best", where="-", source="pooled", key="best")
-    worse = Claim(order=2, words="LIB is worse than LAT", where="-", source="pooled", key="worse")
-    budget = Claim(order=3, words="LAT beats SAC at equal samples", where="-", source="budgets", key="budget")
+    best = Claim(order=1, words="LAT is best", where="-", source="pooled", key="best", robots=("a1",))
+    worse = Claim(order=2, words="LIB is worse than LAT", where="-", source="pooled", key="worse", robots=("a1",))
+    budget = Claim(order=3, words="LAT beats SAC at equal samples", where="-", source="budgets", key="budget",
+                   robots=("a1",))
     first = [_row("velocity_tracking", HOLDS), _row("velocity_tracking", HOLDS, ("lat:normal", "sac:normal"))]
     again = [_row("velocity_tracking", HOLDS, key="worse")]
     # the budget study names the comparison's configurations by their budget: 10000 is the comparison's own
@@ -161,6 +162,18 @@ def test_a_test_an_earlier_section_makes_counts_once():
     assert ledger([("1", best, first), ("2", worse, mixed)])[1].counted
 
 
+def test_a_robot_a_claim_s_source_has_no_runs_of_is_not_measured_yet():
+    """A claim about both robots whose source has checks of one: the other robot's entry is "not measured yet" (the
+    ledger keeps one entry per claim and robot), and it counts as such."""
+    from hierloco.claims import Claim, entry_counts, ledger
+
+    best = Claim(order=1, words="LAT is best", where="-", source="fair", key="best")
+    entries = ledger([("1", best, [_row("velocity_tracking", HOLDS)])])
+    assert [(e.robot, e.verdict, e.counted) for e in entries] == [("a1", "holds", True),
+                                                                   ("daisy", "not measured yet", True)]
+    assert entry_counts(entries)["not measured yet"] == 1
+
+
 def test_the_extra_ik_variant_is_shown_and_not_counted(tmp_path):
     from hierloco.claims import Claim, ledger
     from hierloco.recipes.verdicts import load, pages
@@ -168,7 +181,7 @@ def test_the_extra_ik_variant_is_shown_and_not_counted(tmp_path):
 
     # in the ledger: the variant a claim does not count neither refutes nor establishes its entry
     close = Claim(order=1, words="close to IK", where="-", source="pooled", key="close", extra="extra (not counted)",
-                  counted=lambda check: check.key == "close:ik")
+                  counted=lambda check: check.key == "close:ik", robots=("a1",))
     rows = [_row("velocity_tracking", HOLDS, ("lat:normal", "ik:normal"), key="close:ik"),
             _row("velocity_tracking", REFUTED, ("lat:normal", "ik_plain:normal"), key="close:ik_plain")]
     (entry,) = ledger([("1", close, rows)])

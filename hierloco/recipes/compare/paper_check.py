@@ -52,9 +52,10 @@ CLAIMS = ("learned_best", "close:ik", "close:ik_plain", "damaged:ik", "damaged:i
           "heldout_worse:sac_sac")
 
 
-def check_claims(rows, tuned_ik: dict | None = None) -> list[Check]:
+def check_claims(rows, tuned_ik: dict | None = None, tasks: tuple[str, ...] = TASKS) -> list[Check]:
     """Every claim on every robot and task the rows cover (see the module doc). ``tuned_ik`` (robot -> ``ik`` or
-    ``ik_plain``) marks the IK claims of the variant tuned on the training targets (``recipes/tune``), the fair IK."""
+    ``ik_plain``) marks the IK claims of the variant tuned on the training targets (``recipes/tune``), the fair IK.
+    ``tasks``: the tasks the per-task claims are tested on (the fair targets add ``trajectory_tracking_fast``)."""
     rows = list(rows)
     tuned_ik = dict(tuned_ik or {})
     checks = []
@@ -69,7 +70,7 @@ def check_claims(rows, tuned_ik: dict | None = None) -> list[Check]:
         def figure(key):
             return FIGURES[key.split(":")[0]].get(robot, "")
 
-        for task in TASKS:
+        for task in tasks:
             lat = means("lat", "normal", task)
             others = {m: s for m in LEARNED if (s := means(m, "normal", task)).size}
             if lat.size and others:
