@@ -50,7 +50,8 @@ class TaskRollout:
 
     Attributes:
         result: per-episode costs, cost terms and metrics (:class:`TaskResult`).
-        actions: ``E x T x A`` chosen actions.
+        actions: ``E x T x A`` chosen actions (``E x (T r) x A`` with an env that re-plans ``r`` times per task step:
+            :func:`replans_per_action`).
         com_paths: ``E x (T * N) x 5`` CoM states at 100 Hz (when the env records), else ``None``.
         foot_contacts: ``E x (T * N) x L`` (when the env records), else ``None``.
         qpos: ``E x (T * N) x nq`` generalised positions at 100 Hz (when the env records), for videos.
@@ -89,6 +90,13 @@ class _TimedPolicy:
         return out
 
 
+def replans_per_action(env) -> int:
+    """How many times ``env`` lets a policy choose per task step: ``N / replan_steps`` for a
+    :class:`LatentActionEnv` that re-plans within an action (``docs/terrain.md``), else 1."""
+    replan_steps = getattr(env, "replan_steps", None)
+    return 1 if replan_steps is None else env.steps_per_action // replan_steps
+
+
 def run_task(env: LatentActionEnv, policy, task: Task, *, episodes=None, transforms: Sequence = (),
              progress: bool = False) -> TaskRollout:
     """Runs every episode of ``task`` on ``env``'s robots with ``policy``, one robot per episode.
@@ -104,6 +112,10 @@ def run_task(env: LatentActionEnv, policy, task: Task, *, episodes=None, transfo
         episodes: which episode each robot runs (``B``, default ``b % task.num_episodes``).
         transforms: go after the task transforms (e.g. a goal observation).
         progress: a per-step progress bar.
+
+    With an env that re-plans ``r`` times per task step (:func:`replans_per_action`), the policy chooses ``r``
+    times per task step and the task is scored on its own steps (the state at every ``r``-th env step): the costs
+    compare with those of an env that plans once per step.
     """
     count = env.batch_size[0]
     episodes = (torch.arange(count, device="cpu") % task.num_episodes if episodes is None
@@ -112,13 +124,17 @@ def run_task(env: LatentActionEnv, policy, task: Task, *, episodes=None, transfo
         raise ValueError(f"{count} robots for {episodes.numel()} episodes")
     if isinstance(policy, TaskPolicy):
         policy.begin_task(task)
-    task_env = TransformedEnv(env, Compose(ContinueAfterFalls(), task_transforms(task, episodes), *transforms))
-    with tqdm(total=task.num_steps, desc=task.name, disable=not progress, leave=False) as bar:
+    replans = replans_per_action(env)
+    steps = task.num_steps * replans
+    task_env = TransformedEnv(env, Compose(ContinueAfterFalls(), task_transforms(task, episodes, replans=replans),
+                                           *transforms))
+    with tqdm(total=steps, desc=task.name, disable=not progress, leave=False) as bar:
         timed = _TimedPolicy(policy, bar)
-        rollout = task_env.rollout(max_steps=task.num_steps, policy=timed, auto_reset=True,
-                                   break_when_any_done=False, trust_policy=True)  # E x T
+        rollout = task_env.rollout(max_steps=steps, policy=timed, auto_reset=True,
+                                   break_when_any_done=False, trust_policy=True)  # E x (T r)
     key = "com_state_true" if "com_state_true" in rollout.keys() else "com_state"  # costs on the true state
-    states = torch.cat([rollout[key], rollout["next", key][:, -1:]], 1)
+    # the task's own steps: the state at the start of every r-th env step, and the last
+    states = torch.cat([rollout[key][:, ::replans], rollout["next", key][:, -1:]], 1)
     result = task.evaluate(states, episodes)
     paths = contacts = qpos = None
     metrics = {}
@@ -127,11 +143,11 @@ def run_task(env: LatentActionEnv, policy, task: Task, *, episodes=None, transfo
         contacts = rollout["next", "foot_contacts"].flatten(1, 2).numpy()
         qpos = rollout["next", "qpos"].flatten(1, 2).numpy()
         metrics = task.extra_metrics(paths, episodes.numpy())
-    fallen = rollout["next", "fallen"].squeeze(-1).numpy()  # E x T, true from the step a robot fell
+    fallen = rollout["next", "fallen"].squeeze(-1).numpy()  # E x (T r), true from the step a robot fell
     fell = fallen.any(1)
-    actions = rollout["action"].reshape(count, task.num_steps, -1).float().numpy()
-    return TaskRollout(result, actions, paths, contacts, qpos, fell, timed.seconds / task.num_steps, metrics,
-                       fell_step=np.where(fell, fallen.argmax(1), -1),
+    actions = rollout["action"].reshape(count, steps, -1).float().numpy()
+    return TaskRollout(result, actions, paths, contacts, qpos, fell, timed.seconds / steps, metrics,
+                       fell_step=np.where(fell, fallen.argmax(1) // replans, -1),
                        pushes=list(getattr(getattr(env, "sim", None), "push_log", ())))
 
 

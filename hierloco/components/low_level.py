@@ -66,6 +66,9 @@ class LatentLowLevel(LowLevel):
         self.device = device
         self.robot = get_robot(robot)
         self.steps_per_action = self.policy.steps_per_action
+        # pi(t, z) sees the phase only through harmonics of the gait frequency: its targets repeat every period
+        periods = self.policy.periods_per_action
+        self.period_steps = self.steps_per_action // periods if self.steps_per_action % periods == 0 else None
         self.action_low = trained.latent_low.numpy().astype(np.float64)
         self.action_high = trained.latent_high.numpy().astype(np.float64)
 
@@ -96,6 +99,11 @@ class LatentLowLevel(LowLevel):
 
     def run(self, sim, actions):
         return sim.run(self.patterns(self._check(sim, actions)))
+
+    def _run_first(self, sim, actions, steps):
+        """The first ``steps`` (whole gait periods) of each action's pattern: the next action's first step follows
+        in phase, as the pattern's step after a whole period would."""
+        return sim.run(self.patterns(self._check(sim, actions))[:, :steps])
 
 
 @LOW_LEVELS.register("expert_replay")

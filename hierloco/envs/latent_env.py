@@ -63,12 +63,18 @@ class LatentActionEnv(EnvBase):
             joints), e.g. :func:`hierloco.envs.robots.hardware.perturbed`.
         terrain, pushes, randomization: the ground, pushes on the trunk and randomised dynamics, passed to the
             batched simulator (:class:`hierloco.envs.batched_sim.BatchedSimulator`, ``docs/terrain.md``).
+        replan_steps: control steps a step runs (default the low level's whole action, ``N``): fewer, whole gait
+            periods that divide ``N`` (:meth:`~hierloco.envs.low_level.LowLevel.replan_problem`), run only the first
+            part of each action, so that a planner chooses again ``N / replan_steps`` times per action
+            (``docs/terrain.md``, "Re-planning within an action"); ``com_path`` and the other 100 Hz records are
+            then ``B x replan_steps x ...``.
     """
 
     def __init__(self, low_level: LowLevel, num_robots: int = 1, *, disabled_legs: Sequence[str] = (),
                  init_joint_noise: float = 0.02, record: bool = False, seed: int | None = None,
                  nthread: int | None = None, obstacles: Sequence = (), device: str = "cpu",
-                 limp_legs: Sequence[str] = (), robot=None, terrain=None, pushes=None, randomization=None):
+                 limp_legs: Sequence[str] = (), robot=None, terrain=None, pushes=None, randomization=None,
+                 replan_steps: int | None = None):
         whole = (isinstance(num_robots, numbers.Real) and not isinstance(num_robots, bool)
                  and math.isfinite(num_robots) and float(num_robots).is_integer())
         if not whole or num_robots < 1:
@@ -87,6 +93,11 @@ class LatentActionEnv(EnvBase):
                                     obstacles=obstacles, limp_legs=limp_legs, terrain=terrain, pushes=pushes,
                                     randomization=randomization)
         self.steps_per_action = low_level.steps_per_action
+        self.replan_steps = self.steps_per_action if replan_steps is None else replan_steps
+        problem = low_level.replan_problem(self.replan_steps)
+        if problem is not None:
+            self.sim.close()
+            raise ValueError(problem)
         b = int(num_robots)
         flag = Categorical(2, (b, 1), dtype=torch.bool, device=self.device)
         observation = {"com_state": Unbounded((b, 5), device=self.device),
@@ -96,7 +107,7 @@ class LatentActionEnv(EnvBase):
         if self.com_noise.any():
             observation["com_state_true"] = Unbounded((b, 5), device=self.device)
         if record:
-            n, legs = self.steps_per_action, len(self.robot.legs)
+            n, legs = self.replan_steps, len(self.robot.legs)
             observation["com_path"] = Unbounded((b, n, 5), device=self.device)
             observation["foot_contacts"] = Categorical(2, (b, n, legs), dtype=torch.bool, device=self.device)
             observation["qpos"] = Unbounded((b, n, self.sim.model.nq), dtype=torch.float64, device=self.device)
@@ -129,7 +140,7 @@ class LatentActionEnv(EnvBase):
                     "body_state": torch.as_tensor(self.sim.body_state, dtype=torch.float32, device=self.device)})
         if self.record:
             if result is None:  # at reset: standing still, all feet down
-                n, legs = self.steps_per_action, len(self.robot.legs)
+                n, legs = self.replan_steps, len(self.robot.legs)
                 path = np.repeat(state[:, None], n, 1)
                 contacts = np.ones((len(state), n, legs), dtype=bool)
                 qpos = np.repeat(self.sim.qpos[:, None], n, 1)
@@ -155,7 +166,9 @@ class LatentActionEnv(EnvBase):
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         action = tensordict.get("action").detach().cpu().numpy().astype(np.float64)
-        result = self.low_level.run(self.sim, action.reshape(self.batch_size[0], -1))
+        action = action.reshape(self.batch_size[0], -1)
+        result = (self.low_level.run(self.sim, action) if self.replan_steps == self.steps_per_action
+                  else self.low_level.run_steps(self.sim, action, self.replan_steps))
         failed = result.failed[:, -1]
         self.failures += int(failed.sum())
         terminated = torch.as_tensor(failed, device=self.device)[:, None]

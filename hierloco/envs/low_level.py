@@ -47,6 +47,9 @@ class LowLevel:
     action_high: np.ndarray
     num_choices: int | None = None
     kind: str = "low_level"
+    # Control steps after which an action may be cut and the next begun without a break in the gait (a whole gait
+    # period, for a low level whose joint targets repeat every period), or ``None``: only whole actions run.
+    period_steps: int | None = None
 
     @property
     def action_dim(self) -> int:
@@ -55,6 +58,28 @@ class LowLevel:
     def run(self, sim: BatchedSimulator, actions: np.ndarray) -> SimulationResult:
         """Executes one action (``B x A``) on every copy of ``sim``; returns the ``B x N`` per-step result."""
         raise NotImplementedError
+
+    def run_steps(self, sim: BatchedSimulator, actions: np.ndarray, steps: int) -> SimulationResult:
+        """The first ``steps`` control steps of one action (``B x A``) on every copy (``B x steps`` per-step result),
+        ``steps`` whole gait periods (:attr:`period_steps`): what re-planning every ``steps`` control steps runs
+        (:meth:`replan_problem` says which ``steps`` an env re-planning within a task step allows). A low level that
+        can be cut overrides :meth:`_run_first`."""
+        n = self.steps_per_action
+        if steps == n:
+            return self.run(sim, actions)
+        if self.period_steps is None or isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) \
+                or not 1 <= steps <= n or steps % self.period_steps:
+            raise ValueError(f"an action of this low level can be cut only after whole gait periods of "
+                             f"{self.period_steps} control steps (or not at all: None), got {steps!r}")
+        return self._run_first(sim, actions, steps)
+
+    def _run_first(self, sim: BatchedSimulator, actions: np.ndarray, steps: int) -> SimulationResult:
+        raise NotImplementedError
+
+    def replan_problem(self, steps) -> str | None:
+        """Why an env cannot re-plan this low level's actions every ``steps`` control steps (``None``: it can):
+        :func:`replan_problem` with its ``N`` and :attr:`period_steps`."""
+        return replan_problem(steps, self.steps_per_action, self.period_steps)
 
     @classmethod
     def from_run(cls, run, *, num_robots: int = 1, device: str = "cpu", **options) -> "LowLevel":
@@ -82,3 +107,27 @@ class LowLevel:
         if not np.all(np.isfinite(actions)):
             raise ValueError("actions contain NaN or inf")
         return actions
+
+
+def replan_problem(steps, steps_per_action: int, period_steps: int | None) -> str | None:
+    """Why an env cannot re-plan actions of ``steps_per_action`` control steps (``N``) every ``steps`` (``None``: it
+    can). ``steps`` must be ``N`` or whole gait periods of ``period_steps`` (``None``: the low level runs whole
+    actions only) that divide ``N``, so that the re-planned actions of one task step fill it exactly.
+
+        >>> replan_problem(20, 100, 20) is None, replan_problem(100, 100, None) is None
+        (True, True)
+        >>> replan_problem(40, 100, 20)
+        "replan_steps must be whole gait periods of 20 control steps that divide the action's 100: one of [20, 100], got 40"
+    """
+    n = steps_per_action
+    if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or not 1 <= steps <= n:
+        return f"replan_steps must be a whole number of control steps in [1, {n}], got {steps!r}"
+    if steps == n:
+        return None
+    if period_steps is None:
+        return f"replan_steps must be null or {n}: this low level runs only whole actions of {n} control steps"
+    if steps % period_steps or n % steps:
+        allowed = [k for k in range(period_steps, n + 1, period_steps) if n % k == 0]
+        return (f"replan_steps must be whole gait periods of {period_steps} control steps that divide the action's "
+                f"{n}: one of {allowed}, got {steps}")
+    return None

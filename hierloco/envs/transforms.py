@@ -187,14 +187,62 @@ class TaskReward(Transform):
         return super().transform_output_spec(output_spec)
 
 
-def task_transforms(task, episodes: Sequence[int] | None = None, *, state_key: str = "com_state") -> Compose:
+class TaskStepOfReplans(Transform):
+    """The task step of an env that re-plans ``replans`` times per task step (a
+    :class:`~hierloco.envs.latent_env.LatentActionEnv` with ``replan_steps = N / replans``): ``task_step`` (``B x 1``,
+    int64) is the env steps counted so far (``env_step``, TorchRL's :class:`~torchrl.envs.transforms.StepCounter`)
+    divided by ``replans``, rounded down, so a planner re-planning within a task step scores its plan against the
+    targets of the task step it is in. Part of :func:`task_transforms` with ``replans > 1``.
+
+    Example:
+        >>> from torchrl.envs import TransformedEnv
+        >>> from hierloco.components.gait_policy import train_gait_policy
+        >>> from hierloco.components.low_level import LatentLowLevel
+        >>> from hierloco.envs.latent_env import LatentActionEnv
+        >>> from hierloco.envs.tasks import GoalReaching
+        >>> from hierloco.envs.robots import get_robot
+        >>> import numpy as np
+        >>> standing = np.tile(get_robot("a1").standing_pose, (2, 100, 1))  # a toy gait: two periods of standing
+        >>> trained = train_gait_policy(standing, hidden=8, epochs=1, progress=False, periods_per_action=2)
+        >>> env = LatentActionEnv(LatentLowLevel(trained, "a1"), num_robots=2, replan_steps=50)
+        >>> env = TransformedEnv(env, task_transforms(GoalReaching(num_goals=2, num_steps=2), replans=2))
+        >>> td = env.rollout(4, break_when_any_done=False)
+        >>> td["next", "task_step"][0].squeeze(-1).tolist(), td["next", "truncated"][0].squeeze(-1).tolist()
+        ([0, 1, 1, 2], [False, False, False, True])
+    """
+
+    def __init__(self, replans: int, in_key: str = "env_step", out_key: str = "task_step"):
+        super().__init__(in_keys=[in_key], out_keys=[out_key])
+        self.replans = int(replans)
+
+    def _task_step(self, tensordict: TensorDictBase) -> TensorDictBase:
+        tensordict.set(self.out_keys[0], torch.div(tensordict.get(self.in_keys[0]), self.replans,
+                                                   rounding_mode="floor"))
+        return tensordict
+
+    def _reset(self, tensordict: TensorDictBase, tensordict_reset: TensorDictBase) -> TensorDictBase:
+        return self._task_step(tensordict_reset)
+
+    def _step(self, tensordict: TensorDictBase, next_tensordict: TensorDictBase) -> TensorDictBase:
+        return self._task_step(next_tensordict)
+
+    def transform_observation_spec(self, observation_spec: Composite) -> Composite:
+        observation_spec[self.out_keys[0]] = Unbounded((*observation_spec.shape, 1), dtype=torch.int64,
+                                                       device=observation_spec.device)
+        return observation_spec
+
+
+def task_transforms(task, episodes: Sequence[int] | None = None, *, state_key: str = "com_state",
+                    replans: int = 1) -> Compose:
     """Runs ``task`` on a high-level env (one step per task step): its task state, its reward and its time limit.
 
     ``Compose(TaskEpisode(task, episodes), StepCounter(task.num_steps, step_count_key="task_step"),
     TaskReward(task))``: ``task_episode`` says which target set each robot pursues, ``task_step`` counts the task
     steps done (TorchRL's :class:`~torchrl.envs.transforms.StepCounter`: 0 at a reset, kept across a partial reset
     for the robots not reset, and ``truncated``/``done`` set once it reaches ``task.num_steps``), ``reward`` is
-    ``-task.cost``.
+    ``-task.cost``. With ``replans > 1`` (an env that re-plans that many times per task step), ``env_step`` counts
+    the env's steps, ``task_step`` the task steps (:class:`TaskStepOfReplans`), and no reward is written: a task's
+    cost is defined per task step, and :func:`hierloco.components.evaluation.run_task` scores the task's own steps.
 
     Example:
         >>> from torchrl.envs import TransformedEnv
@@ -209,6 +257,10 @@ def task_transforms(task, episodes: Sequence[int] | None = None, *, state_key: s
         >>> td["next", "task_step"].squeeze(-1).tolist(), td["next", "truncated"][0].squeeze(-1).tolist()
         ([[1, 2, 3, 1, 2], [1, 2, 3, 1, 2]], [False, False, True, False, False])
     """
+    if replans > 1:  # re-planning within each task step: the costs are the task's, on its own steps (run_task)
+        return Compose(TaskEpisode(task, episodes), StepCounter(max_steps=task.num_steps * replans,
+                                                                step_count_key="env_step"),
+                       TaskStepOfReplans(replans))
     return Compose(TaskEpisode(task, episodes), StepCounter(max_steps=task.num_steps, step_count_key="task_step"),
                    TaskReward(task, state_key=state_key))
 

@@ -455,9 +455,18 @@ def check_planner(c: Checker, action_space: str = "box") -> None:
         c.fail(f"planner.beta must be a number >= 0, got {beta!r}")
 
 
-def check_eval(c: Checker) -> dict:
-    """Builds every evaluation task (so a misspelt option is caught now); returns name -> task."""
+def check_eval(c: Checker, replan_period: int | None = None) -> dict:
+    """Builds every evaluation task (so a misspelt option is caught now); returns name -> task. ``eval.replan_steps``
+    (re-planning within an action, ``docs/terrain.md``) is checked against ``replan_period``, the control steps
+    after which the recipe's low level may cut an action (``None``: whole actions only)."""
+    from hierloco.envs.low_level import replan_problem
     from hierloco.envs.tasks import TASKS
+
+    replan_steps = get(c.cfg, "eval.replan_steps")
+    if replan_steps is not None:
+        problem = replan_problem(replan_steps, get(c.cfg, "steps_per_action", 100), replan_period)
+        if problem is not None:
+            c.fail(f"eval.{problem}")
 
     tasks = {}
     try:

@@ -26,7 +26,8 @@ from hierloco.envs.faults import fault_legs, is_unadapted, physical_setting, set
 from hierloco.envs.robots import CONTROL_TIMESTEP, hardware_options
 from hierloco.errors import Finding
 from hierloco.pipeline import report
-from hierloco.pipeline.config import WORLD_KEYS, World, make_task_from_spec, make_world, section, task_specs, world
+from hierloco.pipeline.config import (WORLD_KEYS, World, get, make_task_from_spec, make_world, section, task_specs,
+                                      world)
 from hierloco.pipeline.plan import JsonReport, SettingPlan, Stage
 from hierloco.pipeline.rundir import digest
 from hierloco.results import TaskEvaluation
@@ -296,9 +297,11 @@ def build_dynamics_model(run, params, data: TransitionData, low_level) -> Traine
 def evaluation_stage(cfg, name: str, spec: dict, setting: str, model: Stage, low_level: dict) -> Stage:
     """MPC on one task; cached per task and planner (the file name carries the key's digest), in the task's world
     (:func:`evaluation_params`)."""
+    replan = get(cfg, "eval.replan_steps")  # keyed only when set: every other key is as it was
     params = {"seed": cfg.seed, "device": cfg.device, "setting": setting, "task_name": name,
               "planner": planner_params(cfg), **hardware_params(cfg, setting),
-              **evaluation_params(cfg, name, spec, setting)}
+              **evaluation_params(cfg, name, spec, setting),
+              **({"replan_steps": int(replan)} if replan not in (None, cfg.steps_per_action) else {})}
     after = {"model": model.digest, "low_level": low_level}
     key_digest = digest({"params": params, "after": after})
     return Stage(f"evaluation_{setting}_{name}", params, after, f"evaluation/{setting}/{name}-{key_digest}.npz",
@@ -391,7 +394,8 @@ def evaluation_rollout(robot, params: dict, task, low_level, model: TrainedCoMMo
         world = make_world({key: params.get(key) for key in WORLD_KEYS})
     env = LatentActionEnv(low_level, num_robots=task.num_episodes, disabled_legs=locked, limp_legs=limp,
                           record=True, seed=params["seed"], nthread=nthread, obstacles=task.obstacles,
-                          robot=setting_robot(robot, params["setting"], params.get("hardware")), **world.options())
+                          robot=setting_robot(robot, params["setting"], params.get("hardware")),
+                          replan_steps=params.get("replan_steps"), **world.options())
     try:
         return run_task(env, planner, task, progress=progress)
     finally:

@@ -297,3 +297,18 @@ def test_the_terrain_study_judges_each_lat_variant_against_plain_lat_paired_by_s
     assert jobs == ["eval.generalization={x_rough050: {task: goal_reaching}}"]
     assert compose_recipe("lat", ["preset=small", *jobs]).eval.generalization.x_rough050.task == "goal_reaching"
     assert terrain.generalization_overrides("lat", "paper", {"x": {"task": "goal_reaching"}})[0] == "~eval.generalization"
+
+
+def test_a_variant_that_changes_only_its_evaluations_starts_from_plain_lat_s_trained_runs():
+    """``lat_replan`` (re-planning at 5 Hz on A1) is trained as plain LAT: its jobs reuse plain LAT's trained runs
+    (``trained_as``) and its plan differs from plain LAT's in the evaluations alone."""
+    from hierloco.envs.robots import get_robot
+    from hierloco.recipes.terrain import run as terrain
+    from hydra import compose, initialize_config_dir
+
+    with initialize_config_dir(config_dir=str(Path(terrain.__file__).parent), version_base=None):
+        cfg = compose("config", overrides=["preset=small", "methods=[lat,lat_replan]", "seeds=[0]"])
+    plain, replan = terrain.jobs(cfg, [get_robot("a1")])
+    assert replan.reuse_from == plain.reuse_from == "outputs/lat/small/a1_seed0"
+    assert replan.run_dir.endswith("lat_replan/a1_seed0") and "eval.replan_steps=20" in replan.overrides
+    assert "lat_replan" in terrain.lat_variants(cfg)

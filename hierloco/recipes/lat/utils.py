@@ -17,8 +17,19 @@ def checks(c: config.Checker, robot) -> None:
     config.check_policy(c)
     config.check_dynamics(c)
     config.check_planner(c, "box")
-    config.check_eval(c)
+    config.check_eval(c, replan_period(c.cfg, robot))
     config.check_logger(c)
+
+
+def replan_period(cfg, robot) -> int | None:
+    """The control steps of one gait period of ``robot`` (its gait policy's targets repeat every period: an action
+    may be cut after whole periods), or ``None`` when the robot or the action length is bad (checked elsewhere)."""
+    from hierloco.envs.locomotion import periods_per_action
+
+    try:
+        return cfg.steps_per_action // periods_per_action(robot, cfg.steps_per_action)
+    except (ValueError, AttributeError, TypeError):
+        return None
 
 
 def plan(cfg, robot) -> Plan:

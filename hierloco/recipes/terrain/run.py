@@ -186,6 +186,13 @@ def check(cfg) -> list:
     return robots
 
 
+def trained_as(cfg, method: str) -> str:
+    """The method whose trained runs a method's jobs start from: a variant's ``trained_as`` (a variant that changes
+    only how it is evaluated, say ``lat_replan``, starts from plain LAT's runs), else the method itself."""
+    variant = (cfg.variants or {}).get(method) or {}
+    return str(variant.get("trained_as") or method)
+
+
 def jobs(cfg, robots) -> list:
     planned = []
     for spec in robots:
@@ -198,7 +205,7 @@ def jobs(cfg, robots) -> list:
                              "settings=[normal]", "progress=false", *variant, *cfg.overrides,
                              *(cfg.method_overrides or {}).get(method, []), "eval.videos=[]", "eval.figures=false",
                              *generalization_overrides(recipe, cfg.preset_name, extra)]
-                trained = str(cfg.trained_runs).format(method=method, robot=spec.name, seed=seed)
+                trained = str(cfg.trained_runs).format(method=trained_as(cfg, method), robot=spec.name, seed=seed)
                 planned.append(studies.Job(recipe, str(Path(cfg.runs_dir) / method / f"{spec.name}_seed{seed}"),
                                            overrides, labels={"method": method}, reuse_from=trained))
     return planned
