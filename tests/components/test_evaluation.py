@@ -11,9 +11,7 @@ from torchrl.envs.utils import step_mdp
 
 from hierloco.components.com_model import CoMDynamicsModel
 from hierloco.components.evaluation import run_task
-from hierloco.components.expert_library import build_expert_library
-from hierloco.components.gait_policy import train_gait_policy
-from hierloco.components.low_level import ExpertReplayLowLevel, LatentLowLevel
+from hierloco.components.low_level import ExpertReplayLowLevel
 from hierloco.components.planners import ExhaustivePlanner, RandomShootingPlanner
 from hierloco.components.policies import ActorPolicy, TaskPolicy
 from hierloco.components.sac import SACAgent
@@ -25,18 +23,6 @@ from hierloco.envs.transforms import GoalObservation, task_transforms
 from hierloco.envs.world_model import CoMWorldModelEnv
 
 TWO_GOALS = [[1.0, 0.0], [0.0, 1.0]]
-
-
-@pytest.fixture(scope="module")
-def library():
-    return build_expert_library("a1", 4, seed=0, progress=False)
-
-
-@pytest.fixture(scope="module")
-def latent(library):
-    trained = train_gait_policy(library.joint_targets, latent_dim=2, periods_per_action=5, hidden=64, epochs=20,
-                                progress=False)
-    return LatentLowLevel(trained, "a1")
 
 
 def make_planner(low_level, seed=0):

@@ -11,27 +11,13 @@ import torch
 
 from hierloco.components.com_model import CoMDynamicsModel
 from hierloco.components.evaluation import replans_per_action, run_task
-from hierloco.components.expert_library import build_expert_library
-from hierloco.components.gait_policy import train_gait_policy
-from hierloco.components.low_level import ExpertReplayLowLevel, LatentLowLevel
+from hierloco.components.low_level import ExpertReplayLowLevel
 from hierloco.components.planners import RandomShootingPlanner
 from hierloco.envs.batched_sim import BatchedSimulator
 from hierloco.envs.latent_env import LatentActionEnv
 from hierloco.envs.tasks import GoalReaching
 from hierloco.envs.world_model import CoMWorldModelEnv
 from tests.recipes.stage_plans import plan
-
-
-@pytest.fixture(scope="module")
-def library():
-    return build_expert_library("a1", 4, seed=0, progress=False)
-
-
-@pytest.fixture(scope="module")
-def latent(library):
-    trained = train_gait_policy(library.joint_targets, latent_dim=2, periods_per_action=5, hidden=64, epochs=20,
-                                progress=False)
-    return LatentLowLevel(trained, "a1")
 
 
 def test_a_cut_action_runs_exactly_the_first_gait_periods(latent):
