@@ -112,3 +112,20 @@ def test_is_init_alone_restarts_a_row():
     random_shooting = RandomShootingPlanner(env, num_candidates=10)
     random_shooting(state)
     assert random_shooting.warm_rows.tolist() == [False, False]
+
+
+def test_a_row_re_planning_within_its_task_step_starts_from_its_plan_unshifted():
+    """Re-planning within an action (``eval.replan_steps``): while a row's task step stays, its previous plan's
+    first action is still under way, so the warm start is that plan as it was; once the step moves on, it is shifted
+    by one action."""
+    task = GoalReaching(goals=[[1.0, 0.0], [0.0, 1.0]], num_steps=5)
+    low_level = CommandLowLevel("a1", 1)
+    planner = PLANNERS["cem"](world_model(low_level, task))
+    state = planner.env.initial_state(episode=torch.tensor([0, 1]), step=torch.tensor([1, 1]))
+    planner(state)
+    plan = planner._previous.clone()
+    state["task_step"][1] += 1  # row 0 re-plans within task step 1, row 1 has moved on to task step 2
+    planner._moved_on = planner.moved_on_rows(state)
+    warm = planner.warm_start(2)
+    assert planner._moved_on.tolist() == [False, True]
+    assert torch.equal(warm[0], plan[0]) and torch.equal(warm[1], torch.cat([plan[1, 1:], plan[1, -1:]]))

@@ -91,6 +91,7 @@ class BoxPlannerBase(MPCPlannerBase, TaskPolicy):
         self.init_key, self.step_key, self.episode_key = init_key, step_key, episode_key
         self._marks: dict[str, torch.Tensor] = {}  # B, the step and episode of each row's last plan
         self._keep = None  # B bool while a call plans: the rows whose warm start is still theirs
+        self._moved_on = None  # B bool while a call plans: the rows whose task step moved on since their last plan
         self.warm_rows = None
         self.compile, self.precision, self._imagined_return = False, "fp32", None
 
@@ -133,11 +134,12 @@ class BoxPlannerBase(MPCPlannerBase, TaskPolicy):
         here = self._with_task_state(here)
         td = self._flat(here)
         self._keep = self.continuing_rows(td)
+        self._moved_on = self.moved_on_rows(td)
         self.warm_rows = torch.zeros_like(self._keep)  # planners without warm starts leave it so
         try:
             action = self.action_spec.project(self.planning(here))
         finally:
-            self._keep = None
+            self._keep = self._moved_on = None
         self._marks = {key: td.get(key).reshape(td.batch_size[0], -1)[:, 0].clone()
                        for key in (self.step_key, self.episode_key) if key in td.keys()}
         return self._write_to_tensordict(tensordict, (action.to(source),), tensordict_out)
@@ -161,6 +163,18 @@ class BoxPlannerBase(MPCPlannerBase, TaskPolicy):
                 now = tensordict.get(key).reshape(batch, -1)[:, 0]
                 keep &= ~started_over(now, previous).to(device)
         return keep
+
+    def moved_on_rows(self, tensordict: TensorDictBase) -> torch.Tensor:
+        """``B`` bool: the rows whose task step moved on since their last plan (true where it cannot be told). A row
+        still in the same task step re-plans within an action (``eval.replan_steps``, ``docs/terrain.md``): its
+        previous plan's first action is still the one under way, so its warm start is that plan unshifted."""
+        batch = tensordict.batch_size[0]
+        moved = torch.ones(batch, dtype=torch.bool, device=self.low.device)
+        previous = self._marks.get(self.step_key)
+        if self.step_key in tensordict.keys() and previous is not None and previous.shape[0] == batch:
+            now = tensordict.get(self.step_key).reshape(batch, -1)[:, 0]
+            moved = (now != previous).to(moved.device)
+        return moved
 
     def _flagged_rows(self, tensordict: TensorDictBase) -> torch.Tensor:
         """``B`` bool: the rows of a ``B``-batch whose ``is_init`` or ``_reset`` is set."""
@@ -253,11 +267,16 @@ class BoxPlannerBase(MPCPlannerBase, TaskPolicy):
         return torch.where(keep[:, None, None], warm, centre)
 
     def warm_start(self, batch: int) -> torch.Tensor | None:
-        """The previous plan shifted by one action (its last action repeated), ``batch x H x A``, or ``None``."""
+        """The previous plan shifted by one action (its last action repeated), ``batch x H x A``, or ``None``; a row
+        re-planning within the same task step (:meth:`moved_on_rows`) keeps it unshifted."""
         previous = self._previous
         if previous is None or previous.shape[0] != batch:
             return None
-        return torch.cat([previous[:, 1:], previous[:, -1:]], 1)
+        shifted = torch.cat([previous[:, 1:], previous[:, -1:]], 1)
+        moved = self._moved_on
+        if moved is None or moved.shape[0] != batch:
+            return shifted
+        return torch.where(moved.to(previous.device)[:, None, None], shifted, previous)
 
     def _flat(self, tensordict: TensorDictBase) -> TensorDictBase:
         if tensordict.batch_dims > 1:
