@@ -161,9 +161,11 @@ def gait_scores(foot_contacts: np.ndarray, gaits: Mapping[str, GaitGroups], leg_
 
 
 def classify_gait(foot_contacts: np.ndarray, gaits: Mapping[str, GaitGroups], leg_names: Sequence[str]) -> str:
-    """The gait of ``gaits`` whose score (:func:`gait_scores`) is highest for ``T x L`` foot contacts."""
+    """The gait of ``gaits`` whose score (:func:`gait_scores`) is highest for ``T x L`` foot contacts; of gaits that
+    tie (all feet down the whole time scores every gait 0), the first by name, so that the label does not depend on
+    the order of ``gaits``."""
     scores = gait_scores(foot_contacts, gaits, leg_names)
-    return max(scores, key=scores.get)
+    return max(sorted(scores), key=scores.get)
 
 
 def classify_actions(foot_contacts: np.ndarray, steps_per_action: int, gaits: Mapping[str, GaitGroups],
