@@ -28,14 +28,23 @@ import pytest  # noqa: E402
 
 @pytest.fixture(scope="session")
 def tiny_lat_run(tmp_path_factory):
-    """A tiny LAT run on A1 (normal setting, a video of goal reaching), made once per session in this process.
-    Tests that change it take their own copy (:func:`copy_run`)."""
+    """A tiny LAT run on A1 (normal setting, a video of goal reaching), made once per test session: the first
+    pytest-xdist worker that asks for it builds it in the folder all workers share, the others wait on its lock and
+    take it. Tests that change it take their own copy (:func:`copy_run`)."""
+    from filelock import FileLock
+
     from tests.runner import run_in_process
 
-    run_dir = tmp_path_factory.mktemp("shared") / "lat_tiny"
-    result = run_in_process("lat", "preset=tiny", "progress=false", f"run_dir={run_dir}",
-                            env={"WANDB_MODE": "offline"})
-    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    shared = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        shared = shared.parent  # the session's folder, above each worker's own
+    run_dir, done = shared / "shared_lat_tiny", shared / "shared_lat_tiny.done"
+    with FileLock(str(shared / "shared_lat_tiny.lock")):
+        if not done.exists():
+            result = run_in_process("lat", "preset=tiny", "progress=false", f"run_dir={run_dir}",
+                                    env={"WANDB_MODE": "offline"})
+            assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+            done.write_text("built\n")
     return run_dir
 
 

@@ -79,6 +79,19 @@ def check_environment() -> None:
         raise ConfigError("; ".join(problems))
 
 
+def exit_at_once(code: int) -> None:
+    """Ends the process with ``code`` once its output and logs are flushed, without Python's shutdown (exit
+    handlers, the destructors of extension modules): for a process whose own clean-up is done and whose extensions
+    may not survive the shutdown (a Ray driver whose connection a signal cut short)."""
+    import logging
+
+    logging.shutdown()
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
+    os._exit(code)
+
+
 def sigterm_as_interrupt() -> None:
     """SIGTERM (a study stopping its jobs, a cluster's scheduler) stops the run like Ctrl-C: finished stages are
     kept and the run directory is released."""

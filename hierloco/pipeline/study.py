@@ -39,7 +39,8 @@ def study_main(script_file: str, config_name: str = "config") -> Callable:
 
     def decorate(main: Callable) -> Callable:
         from hierloco.pipeline.entry import (
-            check_environment, describe_config, information_only, one_line_errors, report_error, sigterm_as_interrupt,
+            check_environment, describe_config, exit_at_once, information_only, one_line_errors, report_error,
+            sigterm_as_interrupt,
         )
 
         @hydra.main(config_path=folder, config_name=config_name, version_base=None)
@@ -64,7 +65,9 @@ def study_main(script_file: str, config_name: str = "config") -> Callable:
             except KeyboardInterrupt:
                 print("interrupted: the study's jobs were stopped; their finished stages are kept: run the same "
                       "command again to resume", file=sys.stderr)
-                sys.exit(EXIT_INTERRUPTED)
+                # the study's Ray is stopped and its folder removed (ray_session); Python's own shutdown after a
+                # Ray connection cut short crashes in Ray's C++ teardown (a segmentation fault, or no exit at all)
+                exit_at_once(EXIT_INTERRUPTED)
             except HydraException as error:
                 report_error(error)
                 sys.exit(EXIT_USER_ERROR)

@@ -20,8 +20,9 @@ def run(method, *overrides):
                           timeout=600)
 
 
-@pytest.mark.parametrize("method, settings", [("lib", "[normal]"), ("ik", "[normal,legs_disabled]"),
-                                              ("sac", "[normal]"), ("sac_sac", "[normal]")])
+@pytest.mark.parametrize("method, settings", [
+    ("lib", "[normal]"), ("ik", "[normal,legs_disabled]"), ("sac", "[normal]"),
+    pytest.param("sac_sac", "[normal]", marks=pytest.mark.slow)])  # ~50 s: two SAC trainings
 def test_baseline_recipe_runs(method, settings, tmp_path):
     result = run(method, f"run_dir={tmp_path}", f"settings={settings}")
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]

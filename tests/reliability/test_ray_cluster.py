@@ -128,43 +128,56 @@ def test_what_a_job_on_a_cluster_sends_back_lands_where_no_other_run_lies(tmp_pa
     assert (here / "job.json").read_text().endswith("99.0}")
 
 
-@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
-def test_a_study_ignores_a_stale_cluster_file_and_stops_in_one_line_on_sigterm(tiny_lat_run, tmp_path, private_tmp):
-    """A ``ray_current_cluster`` file left by a head killed without ``ray stop`` (its address dead) made every local
-    study stop with Ray's ValueError. The study starts its own instance. SIGTERM as that instance starts (it ended
-    in Ray's C++ stack dump, exit 134) or while the study's job runs is one line, exit 130, the job's recipe and the
-    study's Ray stopped; the same command then resumes and gives the job's numbers."""
+def stale_cluster_study(tmp: Path, private_tmp: Path, tiny_lat_run: Path) -> tuple[Path, Path, list[str]]:
+    """A ``ray_current_cluster`` file left by a head killed without ``ray stop`` (its address dead), and a tiny
+    comparison study of LAT whose job's run has every stage but its evaluations: the file, the run directory and the
+    study's command."""
     stale = private_tmp / "ray" / "ray_current_cluster"
     stale.parent.mkdir()
     with socket.socket() as unused:  # a port nothing listens on once closed
         unused.bind(("127.0.0.1", 0))
         stale.write_text(f"127.0.0.1:{unused.getsockname()[1]}")
-    run_dir = tmp_path / "outputs" / "lat" / "tiny" / "a1_seed0"
+    run_dir = tmp / "outputs" / "lat" / "tiny" / "a1_seed0"
     shutil.copytree(tiny_lat_run, run_dir, ignore=shutil.ignore_patterns(".lock", "evaluation"))  # left to build
-    command = compare(tmp_path / "out", "methods=[lat]", f"overrides={SMALL}")
+    return stale, run_dir, compare(tmp / "out", "methods=[lat]", f"overrides={SMALL}")
 
-    def sigterm(started) -> tuple[int, str]:
-        """Starts the study, sends it SIGTERM once ``started()``; its exit status and stderr."""
-        study = subprocess.Popen(command, cwd=tmp_path, env=environment(private_tmp), stdout=subprocess.DEVNULL,
-                                 stderr=subprocess.PIPE, text=True)
-        try:
-            wait_until(lambda: started() or study.poll() is not None, 300, "the study got that far")
-            assert study.poll() is None, study.communicate()
-            study.send_signal(signal.SIGTERM)
-            return study.wait(timeout=120), study.stderr.read()
-        finally:
-            if study.poll() is None:
-                study.kill()
 
-    # as Ray's processes are up and the study joins them
-    code, err = sigterm(lambda: list(private_tmp.glob("hierloco-ray-*/session_2*/sockets/raylet")))
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+@pytest.mark.parametrize("moment", ["sockets/raylet", "logs/python-core-driver-*"])  # Ray's processes up; the study joining them
+def test_a_study_ignores_a_stale_cluster_file_and_stops_in_one_line_on_sigterm_as_its_ray_starts(
+        moment, tiny_lat_run, tmp_path, private_tmp):
+    """A stale ``ray_current_cluster`` file made every local study stop with Ray's ValueError: the study starts its
+    own instance. SIGTERM as that instance starts is one line, exit 130, and no process or folder of the study's
+    Ray is left: as Ray's processes are up (it ended in Ray's C++ stack dump, exit 134) and as the study's own
+    connection to them starts (it printed the line, then crashed as Python shut down: a segmentation fault, or no
+    exit at all)."""
+    stale, _, command = stale_cluster_study(tmp_path, private_tmp, tiny_lat_run)
+    study = subprocess.Popen(command, cwd=tmp_path, env=environment(private_tmp), stdout=subprocess.DEVNULL,
+                             stderr=subprocess.PIPE, text=True)
+    try:
+        wait_until(lambda: list(private_tmp.glob(f"hierloco-ray-*/session_2*/{moment}")) or
+                   study.poll() is not None, 300, f"the study's Ray wrote {moment}")
+        assert study.poll() is None, study.communicate()
+        study.send_signal(signal.SIGTERM)
+        code, err = study.wait(timeout=120), study.stderr.read()
+    finally:
+        if study.poll() is None:
+            study.kill()
     assert code == 130 and err.splitlines() == [INTERRUPTED], (code, err[-3000:])
     # no Ray process of the study is left, nor its folder (a process that ray.init had not yet registered when the
     # signal came is stopped too)
     assert not processes_naming(str(private_tmp / "hierloco-ray-")), "the study's Ray processes are stopped"
     assert not list(private_tmp.glob("hierloco-ray-*")), "the study's Ray folder is removed"
+    assert stale.read_text().startswith("127.0.0.1:")  # left as it was
 
-    # while its job runs
+
+@pytest.mark.slow  # ~45 s: a study's job stopped and run again
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_a_study_stopped_by_sigterm_while_its_job_runs_stops_the_job_and_resumes(tiny_lat_run, tmp_path,
+                                                                               private_tmp):
+    """SIGTERM while the study's job runs (a stale cluster file beside it) is one line, exit 130, the job's recipe
+    and the study's Ray stopped; the same command then resumes and gives the job's numbers."""
+    stale, run_dir, command = stale_cluster_study(tmp_path, private_tmp, tiny_lat_run)
     study = subprocess.Popen(command, cwd=tmp_path, env=environment(private_tmp), stdout=subprocess.PIPE,
                              stderr=subprocess.PIPE, text=True)
     try:

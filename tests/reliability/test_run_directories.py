@@ -84,6 +84,7 @@ def test_an_evaluation_name_is_a_plain_name(copy_run, name, tmp_path):
     assert snapshot(tmp_path) == before
 
 
+@pytest.mark.slow  # ~25 s: a Hydra multirun of two evaluations
 def test_a_multirun_on_one_run_directory_runs_its_jobs_in_turn(tiny_lat_run, tmp_path):
     """Case 10: ``-m run_dir=X planner.name=random_shooting,cem``: both jobs finish; the second reuses every
     training stage (the lock is released when a job's main returns)."""
