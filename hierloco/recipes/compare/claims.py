@@ -214,7 +214,7 @@ PAPER_SPLIT = ("the paper's held-out goals are the diagonals, reachable at 0.42 
 
 FAIR_STUDY = Study(
     FAIR, order=10.5, records=("compare_fair/records",), command=FAIR_COMMAND, variants=variants(),
-    names=method_names(), checks=fair_checks, paper_column=paper_check.PAPER_COLUMN)
+    names=method_names(), checks=fair_checks, causes=paper_check.load_causes, paper_column=paper_check.PAPER_COLUMN)
 
 FAIR_SOURCE = Source(
     "fair", order=10.5, checks=fair_checks, folder=lambda check: FAIR, study=lambda check: FAIR, job=fair_job,
